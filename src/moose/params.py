@@ -1,0 +1,250 @@
+"""Typed parameter objects and the strict loader for ROS 2 parameter files.
+
+Every block of the core owns a frozen dataclass of its parameters (SI units,
+paper defaults).  Values come from a ROS 2 parameter YAML file
+(``node_name: {ros__parameters: {...}}``, the ``/**`` wildcard included) through
+:func:`build`, which refuses unknown keys, wrong types and out-of-range values
+with a :class:`ParamError` naming the field and the value.
+
+:class:`VehicleParams` holds Table I of the paper plus the few plant
+quantities the paper does not give (documented in ``docs/design.md``).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import typing
+from pathlib import Path
+from typing import Any, Mapping, TypeVar
+
+import yaml
+
+T = TypeVar("T")
+
+G = 9.81
+"""Gravitational acceleration (m/s^2)."""
+
+
+class ParamError(ValueError):
+    """A parameter (file) is invalid; the message names the field and the value."""
+
+
+def positive(value: float) -> bool:
+    return value > 0.0
+
+
+def non_negative(value: float) -> bool:
+    return value >= 0.0
+
+
+def unit_interval(value: float) -> bool:
+    return 0.0 <= value <= 1.0
+
+
+def check(name: str, value: Any, predicate: typing.Callable[[Any], bool], what: str) -> None:
+    """Raise :class:`ParamError` unless ``predicate(value)``; ``what`` says what was expected."""
+    if not predicate(value):
+        raise ParamError(f"{name} = {value!r} is invalid: expected {what}")
+
+
+@dataclasses.dataclass(frozen=True)
+class VehicleParams:
+    """FPEV2-Kanon single-track parameters: Table I of the paper (SI units).
+
+    ``track``, ``v_low`` and ``mu`` are not in Table I; see docs/design.md.
+    """
+
+    m: float = 925.0
+    """Vehicle mass (kg)."""
+    Izz: float = 617.0
+    """Yaw moment of inertia (kg m^2)."""
+    J_wr: float = 1.24
+    """Rotational inertia of one rear wheel (kg m^2)."""
+    r: float = 0.301
+    """Wheel radius (m)."""
+    lf: float = 0.99
+    """CoG to front axle (m)."""
+    lr: float = 0.71
+    """CoG to rear axle (m)."""
+    T_max: float = 200.0
+    """Maximum torque of one in-wheel motor (N m)."""
+    delta_max: float = 0.3
+    """Maximum steering angle (rad)."""
+    delta_rate_max: float = 2618.0
+    """Maximum steering angular speed (rad/s), Table I as printed."""
+    Cx: float = 1.5
+    """Longitudinal Pacejka shape factor."""
+    Bx: float = 8.0
+    """Longitudinal Pacejka stiffness factor."""
+    Cy: float = 1.4057
+    """Lateral Pacejka shape factor."""
+    By: float = 7.1138
+    """Lateral Pacejka stiffness factor."""
+    mu: float = 1.0
+    """Tyre-road friction coefficient of the plant."""
+    track: float = 1.3
+    """Rear track width (m); not in Table I."""
+    v_low: float = 2.0
+    """Lower bound of the slip denominators (m/s): low-speed regularisation."""
+    g: float = G
+    """Gravitational acceleration (m/s^2)."""
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            check(f"vehicle.{f.name}", getattr(self, f.name), positive, "a positive number")
+
+    @property
+    def wheelbase(self) -> float:
+        """l_f + l_r (m)."""
+        return self.lf + self.lr
+
+    @property
+    def Fzf(self) -> float:
+        """Static normal load on the front axle (N)."""
+        return self.m * self.g * self.lr / self.wheelbase
+
+    @property
+    def Fzr(self) -> float:
+        """Static normal load on the rear axle (N)."""
+        return self.m * self.g * self.lf / self.wheelbase
+
+
+def _coerce(name: str, value: Any, hint: Any) -> Any:
+    """Check ``value`` against the type ``hint``; ints are accepted for floats."""
+    origin = typing.get_origin(hint)
+    if hint is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ParamError(f"{name} = {value!r} is invalid: expected a number")
+        value = float(value)
+        if not math.isfinite(value):
+            raise ParamError(f"{name} = {value!r} is invalid: expected a finite number")
+        return value
+    if hint is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ParamError(f"{name} = {value!r} is invalid: expected an integer")
+        return value
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise ParamError(f"{name} = {value!r} is invalid: expected true or false")
+        return value
+    if hint is str:
+        if not isinstance(value, str):
+            raise ParamError(f"{name} = {value!r} is invalid: expected a string")
+        return value
+    if origin is typing.Literal:
+        allowed = typing.get_args(hint)
+        if value not in allowed:
+            raise ParamError(f"{name} = {value!r} is invalid: expected one of {list(allowed)}")
+        return value
+    if origin in (tuple, list):
+        if not isinstance(value, (list, tuple)):
+            raise ParamError(f"{name} = {value!r} is invalid: expected a list")
+        args = typing.get_args(hint)
+        item = args[0] if args else Any
+        if origin is tuple and len(args) > 1 and args[1] is not Ellipsis:
+            if len(value) != len(args):
+                raise ParamError(f"{name} = {value!r} is invalid: expected {len(args)} items")
+            return tuple(_coerce(f"{name}[{i}]", v, a) for i, (v, a) in enumerate(zip(value, args)))
+        items = [_coerce(f"{name}[{i}]", v, item) if item is not Any else v for i, v in enumerate(value)]
+        return tuple(items) if origin is tuple else items
+    if dataclasses.is_dataclass(hint):
+        if not isinstance(value, Mapping):
+            raise ParamError(f"{name} = {value!r} is invalid: expected a mapping")
+        return build(hint, value, name)
+    if origin is typing.Union:
+        args = [a for a in typing.get_args(hint) if a is not type(None)]
+        if value is None:
+            return None
+        return _coerce(name, value, args[0])
+    return value
+
+
+def build(cls: type[T], mapping: Mapping[str, Any] | None, where: str) -> T:
+    """Instantiate dataclass ``cls`` from ``mapping``, strictly.
+
+    Missing keys take the dataclass default; unknown keys and ill-typed values
+    raise :class:`ParamError` naming ``where.key`` and the value.  Range checks
+    live in each dataclass's ``__post_init__``; their errors are re-raised with
+    the ``where`` prefix.
+    """
+    mapping = {} if mapping is None else mapping
+    if not isinstance(mapping, Mapping):
+        raise ParamError(f"{where} = {mapping!r} is invalid: expected a mapping")
+    hints = typing.get_type_hints(cls)
+    names = {f.name for f in dataclasses.fields(cls) if f.init}
+    unknown = sorted(set(mapping) - names)
+    if unknown:
+        raise ParamError(
+            f"{where}.{unknown[0]} = {mapping[unknown[0]]!r} is unknown; known fields: {sorted(names)}"
+        )
+    kwargs = {key: _coerce(f"{where}.{key}", value, hints[key]) for key, value in mapping.items()}
+    try:
+        return cls(**kwargs)
+    except ParamError as exc:
+        message = str(exc)
+        prefix = where.split(".")[-1] + "."
+        if not message.startswith(where) and not message.startswith(prefix):
+            message = f"{where}.{message}"
+        raise ParamError(message) from None
+
+
+def replace(obj: T, **changes: Any) -> T:
+    """``dataclasses.replace`` that keeps the validation of ``__post_init__``."""
+    return dataclasses.replace(obj, **changes)  # type: ignore[type-var]
+
+
+def to_mapping(obj: Any) -> dict[str, Any]:
+    """Plain dict of a parameter dataclass (nested dataclasses included, tuples as lists)."""
+
+    def plain(value: Any) -> Any:
+        if dataclasses.is_dataclass(value):
+            return {f.name: plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+        if isinstance(value, (list, tuple)):
+            return [plain(v) for v in value]
+        return value
+
+    return plain(obj)
+
+
+def read_ros_params(path: str | Path, node: str | None = None) -> dict[str, Any]:
+    """Read a ROS 2 parameter file and return the merged ``ros__parameters`` for ``node``.
+
+    The ``/**`` wildcard section applies to every node; a section named after
+    ``node`` (with or without a leading ``/``) overrides it key by key.  With
+    ``node=None`` only the wildcard section is returned.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ParamError(f"parameter file {str(path)!r} cannot be read: {exc.strerror}") from None
+    try:
+        document = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ParamError(f"parameter file {str(path)!r} is not valid YAML: {exc}") from None
+    if not isinstance(document, Mapping):
+        raise ParamError(f"parameter file {str(path)!r}: expected a mapping of node names, got {document!r}")
+    merged: dict[str, Any] = {}
+    sections = ["/**"] + ([node, "/" + node.lstrip("/")] if node else [])
+    for section in sections:
+        body = document.get(section)
+        if body is None:
+            continue
+        if not isinstance(body, Mapping) or "ros__parameters" not in body:
+            raise ParamError(f"parameter file {str(path)!r}: section {section!r} has no ros__parameters")
+        params = body["ros__parameters"]
+        if not isinstance(params, Mapping):
+            raise ParamError(f"parameter file {str(path)!r}: {section}.ros__parameters = {params!r} is not a mapping")
+        _deep_merge(merged, params)
+    return merged
+
+
+def _deep_merge(into: dict[str, Any], update: Mapping[str, Any]) -> None:
+    for key, value in update.items():
+        if isinstance(value, Mapping) and isinstance(into.get(key), dict):
+            _deep_merge(into[key], value)
+        elif isinstance(value, Mapping):
+            into[key] = {}
+            _deep_merge(into[key], value)
+        else:
+            into[key] = value
