@@ -1,0 +1,27 @@
+# Two entry points (see README): `make run` and `make test`. Both create the
+# virtual environment in .venv on first use and install everything the project needs.
+PYTHON ?= python3
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+
+.PHONY: run test bench clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+run: $(STAMP)
+	$(BIN)/moose simulate --scenario paper_v7_tau1.4 --json runs/extreme/summary.json --plot runs/extreme/figure.png
+
+test: $(STAMP)
+	$(BIN)/python -m pytest
+
+bench: $(STAMP)
+	$(BIN)/python bench/bench_mpc.py
+	$(BIN)/python bench/bench_closed_loop.py
+
+clean:
+	rm -rf $(VENV) runs

@@ -1,0 +1,166 @@
+"""Moose-test scenarios: the paper's experiments (Sec. VI) as validated files.
+
+A scenario puts the ego vehicle on a straight path (y = 0, heading 0) at the
+speed ``v_init``; a static obstacle's danger zone (the red boxes of Figs. 5–8,
+which bound the CoG) appears suddenly when the time to collision with its near
+edge, τ = (x_min − x) / v_x, reaches ``tau``.  The vehicle must stay inside the
+``field`` (the plotted extent of the paper's result figures by default).
+
+Files live in ``config/scenarios/*.yaml``; :func:`load_scenario` accepts a
+name from that folder or a path, and refuses invalid content with a
+:class:`~moose.params.ParamError` naming the field and the value.
+"""
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any, Optional
+
+import yaml
+
+from .params import ParamError, build, check, non_negative, positive
+from .signals import Obstacle
+
+SCENARIO_DIR = Path(__file__).resolve().parents[2] / "config" / "scenarios"
+"""The scenario folder of a source checkout."""
+
+V_MAX_FIELD = 20.0
+"""Highest speed a scenario may ask for (m/s): the campus field's limit is about 7 m/s."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Box:
+    """Axis-aligned rectangle in the ``odom`` frame (m)."""
+
+    x_min: float
+    x_max: float
+    y_min: float
+    y_max: float
+
+    def __post_init__(self) -> None:
+        if not self.x_min < self.x_max:
+            raise ParamError(f"x_min = {self.x_min!r} is invalid: expected below x_max = {self.x_max!r}")
+        if not self.y_min < self.y_max:
+            raise ParamError(f"y_min = {self.y_min!r} is invalid: expected below y_max = {self.y_max!r}")
+
+    def contains(self, x: float, y: float) -> bool:
+        return self.x_min <= x <= self.x_max and self.y_min <= y <= self.y_max
+
+
+@dataclasses.dataclass(frozen=True)
+class PaperReference:
+    """What the paper reports for this experiment (for comparison only)."""
+
+    nu: Optional[float] = None
+    figure: str = ""
+    note: str = ""
+
+
+@dataclasses.dataclass(frozen=True)
+class Scenario:
+    """One moose test."""
+
+    name: str
+    v_init: float
+    """Speed when the obstacle appears (m/s)."""
+    v_des: float
+    """Desired speed v_des of the planners (m/s)."""
+    tau: float
+    """Time to collision at which the obstacle appears (s)."""
+    obstacle: Box
+    """Danger zone of the obstacle: the box the CoG must avoid (m)."""
+    field: Box = Box(-50.0, 150.0, -5.0, 10.0)
+    """Drivable field; leaving it counts as a failure (m)."""
+    duration: float = 8.0
+    """Simulated time after the obstacle appears (s)."""
+    lead_time: float = 1.0
+    """Straight running before the obstacle appears (s)."""
+    mu: Optional[float] = None
+    """Friction of the plant; ``None`` keeps the configured vehicle μ."""
+    description: str = ""
+    paper: PaperReference = PaperReference()
+
+    def __post_init__(self) -> None:
+        check("name", self.name, lambda v: bool(v.strip()), "a non-empty name")
+        for name in ("v_init", "v_des"):
+            value = getattr(self, name)
+            check(name, value, lambda v: 0.0 < v <= V_MAX_FIELD, f"a speed in (0, {V_MAX_FIELD}] m/s")
+        check("tau", self.tau, positive, "a positive time to collision (s)")
+        check("duration", self.duration, lambda v: 0.0 < v <= 120.0, "a duration in (0, 120] s")
+        check("lead_time", self.lead_time, non_negative, "a non-negative time (s)")
+        if self.mu is not None:
+            check("mu", self.mu, lambda v: 0.05 <= v <= 1.5, "a friction coefficient in [0.05, 1.5]")
+        x_appear = self.x_appear
+        start = self.start_x
+        if not self.field.contains(start, 0.0):
+            raise ParamError(
+                f"field = {dataclasses.asdict(self.field)!r} is invalid: the start point ({start:.2f}, 0) is outside it"
+            )
+        if not self.obstacle.x_min > x_appear:
+            raise ParamError(f"obstacle.x_min = {self.obstacle.x_min!r} is invalid: must lie ahead of the vehicle")
+
+    @property
+    def x_appear(self) -> float:
+        """CoG position x at which the obstacle appears: x_min − v_init τ (m)."""
+        return self.obstacle.x_min - self.v_init * self.tau
+
+    @property
+    def start_x(self) -> float:
+        """CoG position x at the start of the run (m)."""
+        return self.x_appear - self.v_init * self.lead_time
+
+    @property
+    def danger_zone(self) -> Obstacle:
+        """The obstacle as the perception layer reports it."""
+        b = self.obstacle
+        return Obstacle(b.x_min, b.x_max, b.y_min, b.y_max)
+
+
+def scenario_from_mapping(data: Any, where: str = "scenario") -> Scenario:
+    """Validate a parsed scenario file; errors name the field and the value."""
+    if not isinstance(data, dict):
+        raise ParamError(f"{where} = {data!r} is invalid: expected a mapping")
+    return build(Scenario, data, where)
+
+
+def available_scenarios(directory: Path = SCENARIO_DIR) -> list[str]:
+    """Names of the scenario files shipped in ``config/scenarios``."""
+    return sorted(p.stem for p in directory.glob("*.yaml"))
+
+
+def load_scenario(name_or_path: str | Path, directory: Path = SCENARIO_DIR) -> Scenario:
+    """Load a scenario by name (``config/scenarios/NAME.yaml``) or by path."""
+    path = Path(name_or_path)
+    if path.suffix not in (".yaml", ".yml") and len(path.parts) == 1:
+        path = directory / f"{name_or_path}.yaml"
+    if not path.is_file():
+        known = ", ".join(available_scenarios(directory))
+        raise ParamError(f"scenario = {str(name_or_path)!r} is unknown: no file {str(path)!r} (shipped: {known})")
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except yaml.YAMLError as exc:
+        raise ParamError(f"scenario file {str(path)!r} is not valid YAML: {exc}") from None
+    return scenario_from_mapping(data, where=path.stem)
+
+
+def adhoc_scenario(
+    speed: float,
+    tau: float,
+    obstacle_half_width: float,
+    obstacle_length: float = 2.0,
+    duration: float = 8.0,
+) -> Scenario:
+    """A moose test without a file: obstacle centred on the ego path, appearing at τ."""
+    check("speed", speed, lambda v: 0.0 < v <= V_MAX_FIELD, f"a speed in (0, {V_MAX_FIELD}] m/s")
+    check("tau", tau, positive, "a positive time to collision (s)")
+    check("obstacle_half_width", obstacle_half_width, positive, "a positive half width (m)")
+    check("obstacle_length", obstacle_length, positive, "a positive length (m)")
+    x_min = speed * tau
+    return Scenario(
+        name=f"adhoc_v{speed:g}_tau{tau:g}_w{obstacle_half_width:g}",
+        v_init=speed,
+        v_des=speed,
+        tau=tau,
+        obstacle=Box(x_min, x_min + obstacle_length, -obstacle_half_width, obstacle_half_width),
+        duration=duration,
+    )
