@@ -225,7 +225,7 @@ def read_ros_params(path: str | Path, node: str | None = None) -> dict[str, Any]
     if not isinstance(document, Mapping):
         raise ParamError(f"parameter file {str(path)!r}: expected a mapping of node names, got {document!r}")
     merged: dict[str, Any] = {}
-    sections = ["/**"] + ([node, "/" + node.lstrip("/")] if node else [])
+    sections = ["/**"] + ([node.lstrip("/"), "/" + node.lstrip("/")] if node else [])
     for section in sections:
         body = document.get(section)
         if body is None:
