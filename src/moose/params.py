@@ -80,8 +80,8 @@ class VehicleParams:
     """Lateral Pacejka shape factor."""
     By: float = 7.1138
     """Lateral Pacejka stiffness factor."""
-    mu: float = 1.0
-    """Tyre-road friction coefficient of the plant."""
+    mu: float = 0.5
+    """Tyre-road friction coefficient of the plant: the value that reproduces the paper's y_max (docs/design.md)."""
     track: float = 1.3
     """Rear track width (m); not in Table I."""
     v_low: float = 2.0

@@ -1,0 +1,164 @@
+"""Single-track plant of the FPEV2-Kanon: eqs. (trajdef), (eom), (fy), (alphas), Table I.
+
+State ``X = [x, y, θ, v_x, v_y, γ, ω_rl, ω_rr, δ]`` (global position and yaw,
+body velocities and yaw rate, rear wheel speeds, steering angle); input
+``U = [δ̇_cmd, T_rl, T_rr]`` (EPS motor rate command, rear in-wheel motor
+torques).
+
+* Forces: eq. (eom) with the steering angle kept (the plant does not make the
+  small-angle simplification of eq. (eomdyn)); front wheels undriven and
+  unbraked (F_xf = 0); static axle loads (Table I gives no CoG height).
+* Lateral tyres: eq. (fy) on the slip angles of eq. (alphas), written with the
+  bounded speed ``v̄ = max(v_x, v_low)`` in the denominators.
+* Rear tyres: longitudinal magic formula (B_x, C_x) on the slip ratio
+  λ = (r ω − v_w) / max(|v_w|, r|ω|, v_low) of each wheel, wheel ground speed
+  v_w = v_x ∓ γ b/2, load F_zr / 2 each; wheel dynamics J_ωr ω̇ = T − r F_x;
+  the difference of the rear forces adds the yaw moment (F_x,rr − F_x,rl) b/2.
+* Low speed: ``v_low`` bounds every slip denominator.  The wheel-slip ODE has
+  the time constant τ_λ ≈ J_ωr v̄ / (r² μ F_z B_x C_x) ≈ 0.4 ms · v̄ / (1 m/s)
+  at μ = 1, and RK4 is stable for dt < 2.78 τ_λ, so ``v_low = 2 m/s`` keeps the
+  1 kHz integration stable down to standstill; at rest with zero torque every
+  slip and force is zero, so the car stays at rest.
+* Actuators: the steering angle follows the EPS rate command saturated at
+  ±δ̇_max and stops at ±δ_max; motor torques are clipped at ±T_max.
+
+The dynamics are written once as CasADi expressions; RK4 steps are chunked
+(``mapaccum``) because a CasADi call from Python costs tens of microseconds.
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+
+from .params import VehicleParams
+from .tire import pacejka
+
+X, Y, THETA, VX, VY, GAMMA, OMEGA_RL, OMEGA_RR, DELTA = range(9)
+"""Indices of the plant state vector."""
+N_STATE = 9
+N_INPUT = 3
+
+
+def dynamics(state: ca.SX, u: ca.SX, p: VehicleParams) -> tuple[ca.SX, ca.SX]:
+    """State derivative and IMU specific force [a_x, a_y] (CasADi expressions)."""
+    theta, vx, vy, gamma = state[THETA], state[VX], state[VY], state[GAMMA]
+    omega_rl, omega_rr, delta = state[OMEGA_RL], state[OMEGA_RR], state[DELTA]
+    rate_cmd = ca.fmin(ca.fmax(u[0], -p.delta_rate_max), p.delta_rate_max)
+    t_rl = ca.fmin(ca.fmax(u[1], -p.T_max), p.T_max)
+    t_rr = ca.fmin(ca.fmax(u[2], -p.T_max), p.T_max)
+    v_bar = ca.fmax(vx, p.v_low)
+    # eq. (alphas), bounded denominators
+    alpha_f = delta - (vy + p.lf * gamma) / v_bar
+    alpha_r = -(vy - p.lr * gamma) / v_bar
+    fyf = pacejka(alpha_f, p.mu * p.Fzf, p.By, p.Cy, ops=ca)
+    fyr = pacejka(alpha_r, p.mu * p.Fzr, p.By, p.Cy, ops=ca)
+    # rear longitudinal slip and force per wheel
+    half = 0.5 * p.track
+    forces = []
+    for omega, v_w in ((omega_rl, vx - gamma * half), (omega_rr, vx + gamma * half)):
+        denom = ca.fmax(ca.fmax(ca.fabs(v_w), p.r * ca.fabs(omega)), p.v_low)
+        slip = (p.r * omega - v_w) / denom
+        forces.append(pacejka(slip, 0.5 * p.mu * p.Fzr, p.Bx, p.Cx, ops=ca))
+    fx_rl, fx_rr = forces
+    fxr = fx_rl + fx_rr
+    # eq. (eom), F_xf = 0
+    sum_fx = -fyf * ca.sin(delta) + fxr
+    sum_fy = fyf * ca.cos(delta) + fyr
+    sum_mz = fyf * ca.cos(delta) * p.lf - fyr * p.lr + (fx_rr - fx_rl) * half
+    ax, ay = sum_fx / p.m, sum_fy / p.m
+    # steering stops at ±δ_max
+    rate = ca.if_else(ca.logic_and(delta >= p.delta_max, rate_cmd > 0), 0,
+                      ca.if_else(ca.logic_and(delta <= -p.delta_max, rate_cmd < 0), 0, rate_cmd))
+    xdot = ca.vertcat(
+        vx * ca.cos(theta) - vy * ca.sin(theta),
+        vx * ca.sin(theta) + vy * ca.cos(theta),
+        gamma,
+        ax + vy * gamma,
+        ay - vx * gamma,
+        sum_mz / p.Izz,
+        (t_rl - p.r * fx_rl) / p.J_wr,
+        (t_rr - p.r * fx_rr) / p.J_wr,
+        rate,
+    )
+    return xdot, ca.vertcat(ax, ay)
+
+
+@lru_cache(maxsize=16)
+def _functions(p: VehicleParams, dt: float) -> tuple[ca.Function, ca.Function, dict[int, ca.Function]]:
+    s = ca.SX.sym("x", N_STATE)
+    u = ca.SX.sym("u", N_INPUT)
+    xdot, force = dynamics(s, u, p)
+    f = ca.Function("f", [s, u], [xdot, force])
+    k1 = f(s, u)[0]
+    k2 = f(s + 0.5 * dt * k1, u)[0]
+    k3 = f(s + 0.5 * dt * k2, u)[0]
+    k4 = f(s + dt * k3, u)[0]
+    nxt = s + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+    nxt[DELTA] = ca.fmin(ca.fmax(nxt[DELTA], -p.delta_max), p.delta_max)
+    step = ca.Function("rk4", [s, u], [nxt])
+    return f, step, {}
+
+
+class VehiclePlant:
+    """The plant integrated with fixed-step RK4 (default 1 kHz)."""
+
+    def __init__(self, params: VehicleParams, dt: float = 1e-3) -> None:
+        self.params = params
+        self.dt = dt
+        self._f, self._step, self._chunks = _functions(params, dt)
+        self._state = initial_state(params)
+        self._t = 0.0
+
+    @property
+    def state(self) -> np.ndarray:
+        return self._state.copy()
+
+    @property
+    def t(self) -> float:
+        return self._t
+
+    def reset(self, state: np.ndarray, t: float = 0.0) -> None:
+        state = np.asarray(state, dtype=float)
+        if state.shape != (N_STATE,) or not np.all(np.isfinite(state)):
+            raise ValueError(f"state = {state!r} is invalid: expected {N_STATE} finite values")
+        self._state = state.copy()
+        self._t = t
+
+    def _chunk(self, n: int) -> ca.Function:
+        fn = self._chunks.get(n)
+        if fn is None:
+            fn = self._chunks[n] = self._step.mapaccum(n)
+        return fn
+
+    def step(self, u: np.ndarray, n: int = 1) -> np.ndarray:
+        """Advance ``n`` steps of ``dt`` with the input ``u`` held; returns the new state."""
+        u = np.asarray(u, dtype=float)
+        if not np.all(np.isfinite(u)):
+            raise ValueError(f"u = {u!r} is invalid: plant inputs must be finite")
+        if n == 1:
+            out = self._step(self._state, u)
+        else:
+            out = self._chunk(n)(self._state, np.tile(u.reshape(-1, 1), (1, n)))[:, -1]
+        self._state = np.asarray(out, dtype=float).ravel()
+        self._t += n * self.dt
+        return self._state.copy()
+
+    def derivatives(self, state: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Ẋ at (state, u)."""
+        return np.asarray(self._f(state, u)[0], dtype=float).ravel()
+
+    def imu_specific_force(self, state: np.ndarray, u: np.ndarray) -> tuple[float, float]:
+        """Body specific force (a_x, a_y) = (v̇_x − v_y γ, v̇_y + v_x γ) an IMU at the CoG measures."""
+        force = np.asarray(self._f(state, u)[1], dtype=float).ravel()
+        return float(force[0]), float(force[1])
+
+
+def initial_state(params: VehicleParams, x: float = 0.0, y: float = 0.0, theta: float = 0.0,
+                  vx: float = 0.0) -> np.ndarray:
+    """Straight running at ``vx``: wheels rolling without slip, δ = 0."""
+    state = np.zeros(N_STATE)
+    state[[X, Y, THETA, VX]] = (x, y, theta, vx)
+    state[[OMEGA_RL, OMEGA_RR]] = vx / params.r
+    return state
