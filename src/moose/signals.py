@@ -111,6 +111,8 @@ class PlannerInput:
     """Desired speed v_des (m/s)."""
     initial_guess: np.ndarray | None
     """(N_p, 2) global accelerations [v̇_X, v̇_Y]: the previous blend, shifted (or None)."""
+    y_lane: float = 0.0
+    """Lateral position of the lane the car returns to when no obstacle is reported (m)."""
 
 
 @dataclasses.dataclass(frozen=True)
