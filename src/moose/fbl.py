@@ -1,0 +1,74 @@
+"""Feedback linearization (Sec. IV-C): planned accelerations → reference steering angle δ* and speed v_x*.
+
+The global accelerations [v̇_X*, v̇_Y*] are rotated into the body frame,
+[a_x, a_y] = R(−θ) [v̇_X*, v̇_Y*]; a_y is the body-frame inertial acceleration,
+m a_y = m (v̇_y + γ v_x) = F_yf + F_yr (eq. (dvynl)).  The printed FBL formula
+writes "− F_yr^{-1}(l_r γ / v_x − β)", which is dimensionally a force
+subtracted from a force only if it reads F_yr(α_r): we subtract the rear
+force at the current rear slip angle α_r = l_r γ / v_x − β (eq. (alr)),
+invert the front law eq. (fyf) for the required front force on its monotone
+branch (saturating at the peak slip), and add back β + l_f γ / v_x (eq. (alf)):
+
+    δ* = β + l_f γ / v_x + F_yf⁻¹[ m a_y − F_yr(l_r γ / v_x − β) ],
+    v_x* = v_x + t_s v̇_x*,   v̇_x* = a_x + v_y γ   (eq. (dvxnl)).
+
+δ* is clipped to ±δ_max; speeds in the denominators are bounded below by
+``VehicleParams.v_low`` as in the plant.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Optional
+
+import numpy as np
+
+from .params import VehicleParams, check, non_negative, positive
+from .signals import Reference, StateEstimate
+from .tire import inverse_lateral, pacejka
+
+
+@dataclasses.dataclass(frozen=True)
+class FblParams:
+    """FBL parameters."""
+
+    t_s: float = 0.2
+    """Planning sampling time (s): horizon of the speed reference."""
+    mu_model: Optional[float] = None
+    """Friction the FBL assumes; ``None`` uses the vehicle's μ."""
+    v_min_ref: float = 0.0
+    """Lowest speed reference (m/s): the car never reverses."""
+
+    def __post_init__(self) -> None:
+        check("t_s", self.t_s, positive, "a positive time (s)")
+        check("v_min_ref", self.v_min_ref, non_negative, "a non-negative speed (m/s)")
+        if self.mu_model is not None:
+            check("mu_model", self.mu_model, positive, "a positive friction coefficient")
+
+
+class FeedbackLinearization:
+    """δ*, v_x* from the blended accelerations and the current estimate."""
+
+    def __init__(self, params: FblParams, vehicle: VehicleParams) -> None:
+        self.params = params
+        self.vehicle = vehicle
+        mu = params.mu_model if params.mu_model is not None else vehicle.mu
+        self._fzf = mu * vehicle.Fzf
+        self._fzr = mu * vehicle.Fzr
+
+    def reference(self, accel: np.ndarray, estimate: StateEstimate) -> Reference:
+        p = self.vehicle
+        aX, aY = float(accel[0]), float(accel[1])
+        c, s = math.cos(estimate.theta), math.sin(estimate.theta)
+        a_x = c * aX + s * aY
+        a_y = -s * aX + c * aY
+        v_bar = max(estimate.vx, p.v_low)
+        beta = estimate.vy / v_bar
+        alpha_r = p.lr * estimate.gamma / v_bar - beta
+        f_front = p.m * a_y - pacejka(alpha_r, self._fzr, p.By, p.Cy)
+        alpha_f = inverse_lateral(f_front, self._fzf, p.By, p.Cy)
+        delta = beta + p.lf * estimate.gamma / v_bar + alpha_f
+        delta = min(max(delta, -p.delta_max), p.delta_max)
+        vx_dot = a_x + estimate.vy * estimate.gamma
+        vx_ref = max(estimate.vx + self.params.t_s * vx_dot, self.params.v_min_ref)
+        return Reference(delta=float(delta), vx=float(vx_ref))
