@@ -1,0 +1,223 @@
+"""State observer (Sec. III, Fig. 3): β, γ, θ, v_x, v_y and the position from IMU, GPS, wheel speeds and EPS.
+
+An extended Kalman filter on x̂ = [x, y, θ, v_x, v_y, γ].  Process model: the
+single-track dynamics of eqs. (trajdef), (eom), (fy), (alphas) with the
+measured steering angle δ (EPS) and the IMU's longitudinal specific force a_x
+as inputs (v̇_x = a_x + v_y γ, eq. (dvxnl)); speeds in the slip denominators
+bounded below by ``v_low`` as in the plant.  Measurements:
+
+* IMU yaw rate γ, and the IMU lateral specific force a_y against the model's
+  (F_yf cos δ + F_yr) / m — this is what makes v_y (so β) observable;
+* rear wheel speeds: v_x ≈ r (ω_rl + ω_rr) / 2 (slip is absorbed by a larger
+  noise);
+* GPS x, y, v_X, v_Y, delivered ``lag`` seconds after ``t_measured``.  The
+  filter keeps a short history of snapshots and the samples since; a late
+  fix restores the snapshot at its measurement time, is fused there, and the
+  later samples are replayed (exact re-propagation; at 1 Hz this costs about
+  20 predict steps per fix).
+
+Prediction runs at each IMU sample (explicit Euler over the sample interval).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections import deque
+from typing import Optional, Union
+
+import numpy as np
+
+from .params import VehicleParams, check, positive
+from .signals import EpsSample, GpsSample, ImuSample, StateEstimate, WheelSpeedSample
+
+Sample = Union[ImuSample, GpsSample, WheelSpeedSample, EpsSample]
+
+
+@dataclasses.dataclass(frozen=True)
+class ObserverParams:
+    """Noise model (SI units, standard deviations) and history length."""
+
+    mu_model: Optional[float] = None
+    """Friction of the observer's tyre model; ``None`` uses the vehicle's μ."""
+    q_position: float = 0.05
+    q_yaw: float = 0.002
+    q_vx: float = 0.3
+    q_vy: float = 0.3
+    q_yaw_rate: float = 0.3
+    """Process noise densities (per √s) of x/y, θ, v_x, v_y, γ."""
+    r_yaw_rate: float = 0.003
+    r_lateral_accel: float = 0.3
+    """IMU a_y against the model: sensor noise plus tyre-model error (m/s²)."""
+    r_wheel_speed: float = 0.1
+    r_gps_position: float = 0.03
+    r_gps_velocity: float = 0.05
+    history_s: float = 1.5
+    """How far back a late GPS fix can be fused (s)."""
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if value is not None:
+                check(f.name, value, positive, "a positive number")
+
+
+class StateObserver:
+    """EKF with delayed-GPS re-propagation; ``update`` takes samples in time order."""
+
+    def __init__(self, params: ObserverParams, vehicle: VehicleParams, initial: StateEstimate | None = None) -> None:
+        self.params = params
+        self.vehicle = vehicle
+        mu = params.mu_model if params.mu_model is not None else vehicle.mu
+        self._fzf = mu * vehicle.Fzf
+        self._fzr = mu * vehicle.Fzr
+        q = np.array([params.q_position, params.q_position, params.q_yaw, params.q_vx, params.q_vy, params.q_yaw_rate])
+        self._q = q**2
+        self.reset(initial or StateEstimate(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+
+    def reset(self, estimate: StateEstimate) -> None:
+        self._x = np.array([estimate.x, estimate.y, estimate.theta, estimate.vx, estimate.vy, estimate.gamma], dtype=float)
+        self._P = np.diag([0.05, 0.05, 0.01, 0.2, 0.2, 0.05]) ** 2
+        self._t = estimate.t
+        self._delta = estimate.delta
+        self._ax = 0.0
+        self._history: deque[tuple[float, np.ndarray, np.ndarray, float, float, Sample]] = deque()
+
+    def estimate(self) -> StateEstimate:
+        x = self._x
+        return StateEstimate(self._t, float(x[0]), float(x[1]), float(x[2]), float(x[3]), float(x[4]), float(x[5]),
+                             float(self._delta))
+
+    # -- model -------------------------------------------------------------
+    def _tyres(self, x: np.ndarray) -> tuple[float, float, float, float, np.ndarray, np.ndarray]:
+        """Axle forces, their slopes and the gradients of the slip angles w.r.t. x̂."""
+        p = self.vehicle
+        vx, vy, gamma = x[3], x[4], x[5]
+        fast = vx > p.v_low
+        v_bar = vx if fast else p.v_low
+        alpha_f = self._delta - (vy + p.lf * gamma) / v_bar
+        alpha_r = -(vy - p.lr * gamma) / v_bar
+        fyf, kf = _pacejka_and_slope(alpha_f, self._fzf, p.By, p.Cy)
+        fyr, kr = _pacejka_and_slope(alpha_r, self._fzr, p.By, p.Cy)
+        dvx_f = (vy + p.lf * gamma) / v_bar**2 if fast else 0.0
+        dvx_r = (vy - p.lr * gamma) / v_bar**2 if fast else 0.0
+        grad_f = np.array([0.0, 0.0, 0.0, dvx_f, -1.0 / v_bar, -p.lf / v_bar])
+        grad_r = np.array([0.0, 0.0, 0.0, dvx_r, -1.0 / v_bar, p.lr / v_bar])
+        return fyf, fyr, kf, kr, grad_f, grad_r
+
+    def _predict(self, dt: float) -> None:
+        if dt <= 0.0:
+            return
+        p, x = self.vehicle, self._x
+        theta, vx, vy, gamma = x[2], x[3], x[4], x[5]
+        c, s, cd = math.cos(theta), math.sin(theta), math.cos(self._delta)
+        fyf, fyr, kf, kr, gf, gr = self._tyres(x)
+        xdot = np.array([
+            vx * c - vy * s, vx * s + vy * c, gamma, self._ax + vy * gamma,
+            (fyf * cd + fyr) / p.m - vx * gamma, (fyf * cd * p.lf - fyr * p.lr) / p.Izz,
+        ])
+        A = np.zeros((6, 6))
+        A[0, 2], A[0, 3], A[0, 4] = -vx * s - vy * c, c, -s
+        A[1, 2], A[1, 3], A[1, 4] = vx * c - vy * s, s, c
+        A[2, 5] = 1.0
+        A[3, 4], A[3, 5] = gamma, vy
+        A[4] = (kf * cd * gf + kr * gr) / p.m
+        A[4, 3] -= gamma
+        A[4, 5] -= vx
+        A[5] = (kf * cd * p.lf * gf - kr * p.lr * gr) / p.Izz
+        F = np.eye(6) + dt * A
+        self._x = x + dt * xdot
+        self._P = F @ self._P @ F.T + np.diag(self._q * dt)
+
+    def _correct(self, H: np.ndarray, innovation: np.ndarray, R: np.ndarray) -> None:
+        P = self._P
+        S = H @ P @ H.T + R
+        K = P @ H.T @ np.linalg.inv(S)
+        self._x = self._x + K @ innovation
+        I_KH = np.eye(6) - K @ H
+        self._P = I_KH @ P @ I_KH.T + K @ R @ K.T
+
+    # -- samples -----------------------------------------------------------
+    def update(self, sample: Sample) -> None:
+        """Fuse one sample; samples must come in delivery-time order."""
+        if sample.t + 1e-9 < self._t:
+            raise ValueError(f"sample.t = {sample.t!r} is invalid: older than the last sample at {self._t!r}")
+        if isinstance(sample, GpsSample):
+            self._fuse_late_gps(sample)
+            return
+        self._history.append((self._t, self._x.copy(), self._P.copy(), self._delta, self._ax, sample))
+        while self._history and self._history[0][0] < sample.t - self.params.history_s:
+            self._history.popleft()
+        self._apply(sample)
+
+    def _apply(self, sample: Sample) -> None:
+        p, prm = self.vehicle, self.params
+        if isinstance(sample, ImuSample):
+            self._predict(sample.t - self._t)
+            self._t = sample.t
+            self._ax = sample.ax
+            fyf, fyr, kf, kr, gf, gr = self._tyres(self._x)
+            cd = math.cos(self._delta)
+            H = np.zeros((2, 6))
+            H[0, 5] = 1.0
+            H[1] = (kf * cd * gf + kr * gr) / p.m
+            z = np.array([sample.yaw_rate, sample.ay])
+            h = np.array([self._x[5], (fyf * cd + fyr) / p.m])
+            self._correct(H, z - h, np.diag([prm.r_yaw_rate**2, prm.r_lateral_accel**2]))
+        elif isinstance(sample, WheelSpeedSample):
+            self._t = max(self._t, sample.t)
+            H = np.zeros((1, 6))
+            H[0, 3] = 1.0
+            v_wheels = 0.5 * p.r * (sample.omega_rl + sample.omega_rr)
+            self._correct(H, np.array([v_wheels - self._x[3]]), np.array([[prm.r_wheel_speed**2]]))
+        elif isinstance(sample, EpsSample):
+            self._t = max(self._t, sample.t)
+            self._delta = sample.delta
+        elif isinstance(sample, GpsSample):
+            self._gps_correct(sample)
+        else:
+            raise TypeError(f"sample = {sample!r} is not a sensor sample")
+
+    def _gps_correct(self, fix: GpsSample) -> None:
+        prm, x = self.params, self._x
+        theta, vx, vy = x[2], x[3], x[4]
+        c, s = math.cos(theta), math.sin(theta)
+        H = np.zeros((4, 6))
+        H[0, 0] = H[1, 1] = 1.0
+        H[2, 2], H[2, 3], H[2, 4] = -vx * s - vy * c, c, -s
+        H[3, 2], H[3, 3], H[3, 4] = vx * c - vy * s, s, c
+        h = np.array([x[0], x[1], vx * c - vy * s, vx * s + vy * c])
+        z = np.array([fix.x, fix.y, fix.vX, fix.vY])
+        R = np.diag([prm.r_gps_position**2] * 2 + [prm.r_gps_velocity**2] * 2)
+        self._correct(H, z - h, R)
+
+    def _fuse_late_gps(self, fix: GpsSample) -> None:
+        """Fuse a fix at its measurement time and replay the samples delivered since."""
+        history = self._history
+        index = None
+        for i in range(len(history) - 1, -1, -1):
+            if history[i][0] <= fix.t_measured + 1e-9:
+                index = i
+                break
+        if index is None:
+            self._gps_correct(fix)  # older than the history: fuse now (documented degradation)
+            return
+        t0, x0, P0, delta0, ax0, _ = history[index]
+        replay = [entry[5] for entry in list(history)[index:]]
+        now = self._t
+        self._t, self._x, self._P, self._delta, self._ax = t0, x0.copy(), P0.copy(), delta0, ax0
+        # predict from the snapshot to the measurement time, fuse, then replay
+        self._predict(fix.t_measured - t0)
+        self._t = max(t0, fix.t_measured)
+        self._gps_correct(fix)
+        rebuilt: deque = deque(list(history)[:index])
+        for sample in replay:
+            rebuilt.append((self._t, self._x.copy(), self._P.copy(), self._delta, self._ax, sample))
+            self._apply(sample)
+        self._history = rebuilt
+        self._t = max(self._t, now)
+
+
+def _pacejka_and_slope(alpha: float, mu_fz: float, B: float, C: float) -> tuple[float, float]:
+    """F = μF_z sin(C atan(Bα)) and dF/dα."""
+    phi = C * math.atan(B * alpha)
+    return mu_fz * math.sin(phi), mu_fz * math.cos(phi) * C * B / (1.0 + (B * alpha) ** 2)
