@@ -1,0 +1,36 @@
+"""Closed-loop real-time factor: simulated seconds per wall-clock second (target ≥ 50×).
+
+The baseline is the simulated time itself (real time = 1×), measured in the
+same run; the MSF-only run is printed too, to show what the MPC costs.
+Run: ``python bench/bench_closed_loop.py``.
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+
+from moose.config import load_config
+from moose.maneuver import MaxSteeringTable
+from moose.scenario import load_scenario
+from moose.simulation import simulate
+
+
+def main() -> None:
+    config = load_config()
+    table = MaxSteeringTable.build(config.vehicle, config.maneuver)
+    scenario = dataclasses.replace(load_scenario("paper_v7_tau1.4"), lead_time=1.0, duration=9.0)
+    simulated = scenario.lead_time + scenario.duration
+    print(f"closed loop, {simulated:.0f} s simulated (plant 1 kHz, control 100 Hz, planning 5 Hz)")
+    print(f"{'planner':>10} {'wall s':>8} {'real-time factor':>17}")
+    for planner in ("combined", "mpc", "msf"):
+        simulate(config, scenario, planner, seed=0, table=table)  # warm-up (CasADi set-up)
+        best = float("inf")
+        for _ in range(3):
+            start = time.perf_counter()
+            simulate(config, scenario, planner, seed=0, table=table)
+            best = min(best, time.perf_counter() - start)
+        print(f"{planner:>10} {best:8.3f} {simulated / best:16.1f}x")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,140 @@
+"""The ``moose`` command.
+
+``moose simulate`` runs one moose test in lockstep (a scenario file or an
+ad-hoc test), prints the summary and optionally writes JSON and the figure.
+Bad input ends with ``moose: error: …`` naming the field and the value, and a
+non-zero exit status.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+from .params import ParamError
+
+DEFAULT_SCENARIO = "paper_v7_tau1.4"
+"""The paper's extreme case (7 m/s, τ = 1.4 s, ν ≈ 0.95): the main job."""
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not value > 0.0:
+        raise argparse.ArgumentTypeError(f"{text!r} must be positive")
+    return value
+
+
+def add_scenario_arguments(parser: argparse.ArgumentParser) -> None:
+    """Scenario selection shared by ``simulate`` and ``launch``."""
+    group = parser.add_argument_group("scenario (a file or an ad-hoc moose test)")
+    group.add_argument("--scenario", help=f"name in config/scenarios or a YAML path (default {DEFAULT_SCENARIO})")
+    group.add_argument("--speed", type=_positive_float, help="ad-hoc test: speed at detection and desired speed (m/s)")
+    group.add_argument("--tau", type=_positive_float, help="ad-hoc test: time to collision at appearance (s)")
+    group.add_argument("--obstacle-half-width", type=_positive_float, help="ad-hoc test: danger-zone half width (m)")
+    group.add_argument("--obstacle-length", type=_positive_float, default=2.0, help="ad-hoc test: length (m)")
+    group.add_argument("--duration", type=_positive_float, help="simulated seconds after the obstacle appears")
+    group.add_argument("--config", help="ROS 2 parameter file (default config/moose.yaml)")
+    group.add_argument("--planner", choices=["combined", "mpc", "msf"], help="planner driving the car")
+    group.add_argument("--mu", type=_positive_float, help="friction coefficient of the plant")
+    group.add_argument("--seed", type=int, default=0, help="seed of the sensor noise")
+
+
+def scenario_from_args(args: argparse.Namespace) -> Any:
+    """The scenario named by the arguments (file, or ad-hoc flags)."""
+    import dataclasses
+
+    from .scenario import adhoc_scenario, load_scenario
+
+    adhoc = [args.speed, args.tau, args.obstacle_half_width]
+    if any(v is not None for v in adhoc):
+        if args.scenario:
+            raise ParamError("--scenario cannot be combined with the ad-hoc flags --speed/--tau/--obstacle-half-width")
+        if any(v is None for v in adhoc):
+            raise ParamError("an ad-hoc moose test needs --speed, --tau and --obstacle-half-width")
+        scenario = adhoc_scenario(args.speed, args.tau, args.obstacle_half_width, args.obstacle_length)
+    else:
+        scenario = load_scenario(args.scenario or DEFAULT_SCENARIO)
+    changes: dict[str, Any] = {}
+    if args.duration is not None:
+        changes["duration"] = args.duration
+    if args.mu is not None:
+        changes["mu"] = args.mu
+    return dataclasses.replace(scenario, **changes) if changes else scenario
+
+
+def format_summary(summary: dict[str, Any]) -> str:
+    """Human-readable lines of a run summary."""
+    solve = summary["mpc_solve_ms"]
+    lines = [
+        f"scenario        {summary['scenario']}  (planner {summary['planner']}, seed {summary['seed']})",
+        f"threat          tau = {_fmt(summary['tau_s'])} s, nu = {_fmt(summary['nu'])}"
+        f" (paper {_fmt(summary['paper_nu'])}), w = {_fmt(summary['w_m'])} m",
+        f"outcome         {'COLLISION' if summary['collided'] else 'collision-free'}, "
+        f"{'LEFT THE FIELD' if summary['left_field'] else 'inside the field'}",
+        f"min clearance   {summary['min_clearance_m']:.2f} m",
+        f"max |delta|     {summary['max_abs_steer_rad']:.3f} rad",
+        f"max |y - y0|    {summary['max_lateral_offset_m']:.2f} m (final {summary['final_lateral_offset_m']:+.2f} m)",
+        f"speed range     {summary['min_speed_mps']:.2f} .. {summary['max_speed_mps']:.2f} m/s",
+        f"MPC solves      {solve['count']}  median {_fmt(solve['median'])} ms, p95 {_fmt(solve['p95'])} ms,"
+        f" max {_fmt(solve['max'])} ms  statuses {summary['mpc_status_counts']}",
+        f"mean w_MPC      {_fmt(summary['mean_weight_mpc'])} (over steps with a threat)",
+    ]
+    return "\n".join(lines)
+
+
+def _fmt(value: Any) -> str:
+    return "n/a" if value is None else f"{value:.3g}"
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    from .config import load_config
+    from .metrics import summarize
+    from .plots import plot_result
+    from .simulation import simulate
+
+    scenario = scenario_from_args(args)
+    config = load_config(args.config)
+    result = simulate(config, scenario, planner=args.planner, seed=args.seed)
+    summary = summarize(result)
+    print(format_summary(summary))
+    if args.json:
+        path = Path(args.json)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+        print(f"summary         {path}")
+    if args.plot:
+        print(f"figure          {plot_result([result], args.plot)}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="moose", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    simulate = sub.add_parser("simulate", help="run one moose test in lockstep")
+    add_scenario_arguments(simulate)
+    simulate.add_argument("--json", help="write the summary as JSON to this path")
+    simulate.add_argument("--plot", help="write the paper-style figure (PNG) to this path")
+    simulate.set_defaults(handler=cmd_simulate)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    handler: Callable[[argparse.Namespace], int] = args.handler
+    try:
+        return handler(args)
+    except ParamError as exc:
+        print(f"moose: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
