@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Optional
 
 import numpy as np
 
@@ -34,16 +33,15 @@ class FblParams:
 
     t_s: float = 0.2
     """Planning sampling time (s): horizon of the speed reference."""
-    mu_model: Optional[float] = None
-    """Friction the FBL assumes; ``None`` uses the vehicle's μ."""
+    mu_model: float = 0.0
+    """Friction the FBL assumes; 0 uses the vehicle's μ (ROS 2 parameters cannot be null)."""
     v_min_ref: float = 0.0
     """Lowest speed reference (m/s): the car never reverses."""
 
     def __post_init__(self) -> None:
         check("t_s", self.t_s, positive, "a positive time (s)")
         check("v_min_ref", self.v_min_ref, non_negative, "a non-negative speed (m/s)")
-        if self.mu_model is not None:
-            check("mu_model", self.mu_model, positive, "a positive friction coefficient")
+        check("mu_model", self.mu_model, non_negative, "a friction coefficient (0: the vehicle's)")
 
 
 class FeedbackLinearization:
@@ -52,7 +50,7 @@ class FeedbackLinearization:
     def __init__(self, params: FblParams, vehicle: VehicleParams) -> None:
         self.params = params
         self.vehicle = vehicle
-        mu = params.mu_model if params.mu_model is not None else vehicle.mu
+        mu = params.mu_model if params.mu_model > 0.0 else vehicle.mu
         self._fzf = mu * vehicle.Fzf
         self._fzr = mu * vehicle.Fzr
 

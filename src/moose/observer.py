@@ -23,22 +23,24 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections import deque
-from typing import Optional, Union
+from typing import Union
 
 import numpy as np
 
-from .params import VehicleParams, check, positive
+from .params import VehicleParams, check, non_negative, positive
 from .signals import EpsSample, GpsSample, ImuSample, StateEstimate, WheelSpeedSample
 
 Sample = Union[ImuSample, GpsSample, WheelSpeedSample, EpsSample]
+_EYE6 = np.eye(6)
+_DIAG6 = np.diag_indices(6)
 
 
 @dataclasses.dataclass(frozen=True)
 class ObserverParams:
     """Noise model (SI units, standard deviations) and history length."""
 
-    mu_model: Optional[float] = None
-    """Friction of the observer's tyre model; ``None`` uses the vehicle's μ."""
+    mu_model: float = 0.0
+    """Friction of the observer's tyre model; 0 uses the vehicle's μ (ROS 2 parameters cannot be null)."""
     q_position: float = 0.05
     q_yaw: float = 0.002
     q_vx: float = 0.3
@@ -55,10 +57,9 @@ class ObserverParams:
     """How far back a late GPS fix can be fused (s)."""
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if value is not None:
-                check(f.name, value, positive, "a positive number")
+        check("mu_model", self.mu_model, non_negative, "a friction coefficient (0: the vehicle's)")
+        for f in dataclasses.fields(self)[1:]:
+            check(f.name, getattr(self, f.name), positive, "a positive number")
 
 
 class StateObserver:
@@ -67,7 +68,7 @@ class StateObserver:
     def __init__(self, params: ObserverParams, vehicle: VehicleParams, initial: StateEstimate | None = None) -> None:
         self.params = params
         self.vehicle = vehicle
-        mu = params.mu_model if params.mu_model is not None else vehicle.mu
+        mu = params.mu_model if params.mu_model > 0.0 else vehicle.mu
         self._fzf = mu * vehicle.Fzf
         self._fzr = mu * vehicle.Fzr
         q = np.array([params.q_position, params.q_position, params.q_yaw, params.q_vx, params.q_vy, params.q_yaw_rate])
@@ -124,17 +125,20 @@ class StateObserver:
         A[4, 3] -= gamma
         A[4, 5] -= vx
         A[5] = (kf * cd * p.lf * gf - kr * p.lr * gr) / p.Izz
-        F = np.eye(6) + dt * A
+        F = _EYE6 + dt * A
         self._x = x + dt * xdot
-        self._P = F @ self._P @ F.T + np.diag(self._q * dt)
+        P = F @ self._P @ F.T
+        P[_DIAG6] += self._q * dt
+        self._P = P
 
     def _correct(self, H: np.ndarray, innovation: np.ndarray, R: np.ndarray) -> None:
-        P = self._P
-        S = H @ P @ H.T + R
-        K = P @ H.T @ np.linalg.inv(S)
-        self._x = self._x + K @ innovation
-        I_KH = np.eye(6) - K @ H
-        self._P = I_KH @ P @ I_KH.T + K @ R @ K.T
+        """Kalman update with diagonal R, done as sequential scalar updates (exact for independent noise)."""
+        x0 = self._x
+        for row, nu, r in zip(H, innovation, np.diag(R)):
+            PHt = self._P @ row
+            gain = PHt / (row @ PHt + r)
+            self._x = self._x + gain * (nu - row @ (self._x - x0))
+            self._P = self._P - np.outer(gain, PHt)
 
     # -- samples -----------------------------------------------------------
     def update(self, sample: Sample) -> None:

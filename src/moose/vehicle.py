@@ -22,8 +22,11 @@ torques).
 * Actuators: the steering angle follows the EPS rate command saturated at
   ±δ̇_max and stops at ±δ_max; motor torques are clipped at ±T_max.
 
-The dynamics are written once as CasADi expressions; RK4 steps are chunked
-(``mapaccum``) because a CasADi call from Python costs tens of microseconds.
+The dynamics are written once as CasADi expressions.  ``step(u, n)`` runs n
+RK4 steps with u held in one call of a function compiled to C (``ccompile``;
+CasADi's virtual machine when no C compiler is present), which also returns the
+IMU specific force at the new state, because a CasADi call from Python costs
+more than the integration itself.
 """
 from __future__ import annotations
 
@@ -32,6 +35,7 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
+from .ccompile import CompiledFunction, compile_function
 from .params import VehicleParams
 from .tire import pacejka
 
@@ -86,7 +90,7 @@ def dynamics(state: ca.SX, u: ca.SX, p: VehicleParams) -> tuple[ca.SX, ca.SX]:
 
 
 @lru_cache(maxsize=16)
-def _functions(p: VehicleParams, dt: float) -> tuple[ca.Function, ca.Function, dict[int, ca.Function]]:
+def _functions(p: VehicleParams, dt: float) -> tuple[ca.Function, ca.Function]:
     s = ca.SX.sym("x", N_STATE)
     u = ca.SX.sym("u", N_INPUT)
     xdot, force = dynamics(s, u, p)
@@ -98,7 +102,20 @@ def _functions(p: VehicleParams, dt: float) -> tuple[ca.Function, ca.Function, d
     nxt = s + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
     nxt[DELTA] = ca.fmin(ca.fmax(nxt[DELTA], -p.delta_max), p.delta_max)
     step = ca.Function("rk4", [s, u], [nxt])
-    return f, step, {}
+    return f, step
+
+
+@lru_cache(maxsize=32)
+def _chunk(p: VehicleParams, dt: float, n: int) -> ca.Function | CompiledFunction:
+    """n RK4 steps with the input held, and the specific force at the end state."""
+    f, step = _functions(p, dt)
+    s = ca.SX.sym("x", N_STATE)
+    u = ca.SX.sym("u", N_INPUT)
+    x = s
+    for _ in range(n):
+        x = step(x, u)
+    chunk = ca.Function(f"plant_chunk_{n}", [s, u], [x, f(x, u)[1]])
+    return compile_function(chunk) or chunk
 
 
 class VehiclePlant:
@@ -107,9 +124,10 @@ class VehiclePlant:
     def __init__(self, params: VehicleParams, dt: float = 1e-3) -> None:
         self.params = params
         self.dt = dt
-        self._f, self._step, self._chunks = _functions(params, dt)
+        self._f, self._step = _functions(params, dt)
         self._state = initial_state(params)
         self._t = 0.0
+        self._force: tuple[np.ndarray, np.ndarray, tuple[float, float]] | None = None
 
     @property
     def state(self) -> np.ndarray:
@@ -126,22 +144,15 @@ class VehiclePlant:
         self._state = state.copy()
         self._t = t
 
-    def _chunk(self, n: int) -> ca.Function:
-        fn = self._chunks.get(n)
-        if fn is None:
-            fn = self._chunks[n] = self._step.mapaccum(n)
-        return fn
-
     def step(self, u: np.ndarray, n: int = 1) -> np.ndarray:
         """Advance ``n`` steps of ``dt`` with the input ``u`` held; returns the new state."""
         u = np.asarray(u, dtype=float)
-        if not np.all(np.isfinite(u)):
-            raise ValueError(f"u = {u!r} is invalid: plant inputs must be finite")
-        if n == 1:
-            out = self._step(self._state, u)
-        else:
-            out = self._chunk(n)(self._state, np.tile(u.reshape(-1, 1), (1, n)))[:, -1]
-        self._state = np.asarray(out, dtype=float).ravel()
+        if u.shape != (N_INPUT,) or not np.all(np.isfinite(u)):
+            raise ValueError(f"u = {u!r} is invalid: expected {N_INPUT} finite plant inputs")
+        state, force = _chunk(self.params, self.dt, n)(self._state, u)
+        self._state = np.asarray(state, dtype=float).ravel()
+        force = np.asarray(force, dtype=float).ravel()
+        self._force = (self._state.copy(), u.copy(), (float(force[0]), float(force[1])))
         self._t += n * self.dt
         return self._state.copy()
 
@@ -151,6 +162,8 @@ class VehiclePlant:
 
     def imu_specific_force(self, state: np.ndarray, u: np.ndarray) -> tuple[float, float]:
         """Body specific force (a_x, a_y) = (v̇_x − v_y γ, v̇_y + v_x γ) an IMU at the CoG measures."""
+        if self._force is not None and np.array_equal(self._force[0], state) and np.array_equal(self._force[1], u):
+            return self._force[2]
         force = np.asarray(self._f(state, u)[1], dtype=float).ravel()
         return float(force[0]), float(force[1])
 
