@@ -30,6 +30,7 @@ more than the integration itself.
 """
 from __future__ import annotations
 
+import dataclasses
 from functools import lru_cache
 
 import casadi as ca
@@ -89,33 +90,44 @@ def dynamics(state: ca.SX, u: ca.SX, p: VehicleParams) -> tuple[ca.SX, ca.SX]:
     return xdot, ca.vertcat(ax, ay)
 
 
-@lru_cache(maxsize=16)
-def _functions(p: VehicleParams, dt: float) -> tuple[ca.Function, ca.Function]:
+PARAM_FIELDS = tuple(f.name for f in dataclasses.fields(VehicleParams))
+CHUNK = 10
+"""Steps per compiled call; longer advances loop over it."""
+
+
+def _symbolic_params() -> tuple[ca.SX, VehicleParams]:
+    """A VehicleParams whose fields are CasADi symbols (its derived properties follow)."""
+    vector = ca.SX.sym("p", len(PARAM_FIELDS))
+    params = object.__new__(VehicleParams)
+    for i, name in enumerate(PARAM_FIELDS):
+        object.__setattr__(params, name, vector[i])
+    return vector, params
+
+
+@lru_cache(maxsize=None)
+def _functions() -> tuple[ca.Function, ca.Function, dict[int, ca.Function | CompiledFunction]]:
+    """Dynamics, one RK4 step and the compiled n-step chunks, parametric in (vehicle, dt)."""
     s = ca.SX.sym("x", N_STATE)
     u = ca.SX.sym("u", N_INPUT)
+    dt = ca.SX.sym("dt")
+    pv, p = _symbolic_params()
     xdot, force = dynamics(s, u, p)
-    f = ca.Function("f", [s, u], [xdot, force])
-    k1 = f(s, u)[0]
-    k2 = f(s + 0.5 * dt * k1, u)[0]
-    k3 = f(s + 0.5 * dt * k2, u)[0]
-    k4 = f(s + dt * k3, u)[0]
+    f = ca.Function("f", [s, u, pv], [xdot, force])
+    k1 = f(s, u, pv)[0]
+    k2 = f(s + 0.5 * dt * k1, u, pv)[0]
+    k3 = f(s + 0.5 * dt * k2, u, pv)[0]
+    k4 = f(s + dt * k3, u, pv)[0]
     nxt = s + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
     nxt[DELTA] = ca.fmin(ca.fmax(nxt[DELTA], -p.delta_max), p.delta_max)
-    step = ca.Function("rk4", [s, u], [nxt])
-    return f, step
-
-
-@lru_cache(maxsize=32)
-def _chunk(p: VehicleParams, dt: float, n: int) -> ca.Function | CompiledFunction:
-    """n RK4 steps with the input held, and the specific force at the end state."""
-    f, step = _functions(p, dt)
-    s = ca.SX.sym("x", N_STATE)
-    u = ca.SX.sym("u", N_INPUT)
-    x = s
-    for _ in range(n):
-        x = step(x, u)
-    chunk = ca.Function(f"plant_chunk_{n}", [s, u], [x, f(x, u)[1]])
-    return compile_function(chunk) or chunk
+    step = ca.Function("rk4", [s, u, pv, dt], [nxt])
+    chunks: dict[int, ca.Function | CompiledFunction] = {}
+    for n in (1, CHUNK):
+        x = s
+        for _ in range(n):
+            x = step(x, u, pv, dt)
+        chunk = ca.Function(f"moose_plant_chunk_{n}", [s, u, pv, dt], [x, f(x, u, pv)[1]])
+        chunks[n] = compile_function(chunk) or chunk
+    return f, step, chunks
 
 
 class VehiclePlant:
@@ -124,7 +136,8 @@ class VehiclePlant:
     def __init__(self, params: VehicleParams, dt: float = 1e-3) -> None:
         self.params = params
         self.dt = dt
-        self._f, self._step = _functions(params, dt)
+        self._f, _, self._chunks = _functions()
+        self._p = np.array([float(getattr(params, name)) for name in PARAM_FIELDS])
         self._state = initial_state(params)
         self._t = 0.0
         self._force: tuple[np.ndarray, np.ndarray, tuple[float, float]] | None = None
@@ -149,8 +162,13 @@ class VehiclePlant:
         u = np.asarray(u, dtype=float)
         if u.shape != (N_INPUT,) or not np.all(np.isfinite(u)):
             raise ValueError(f"u = {u!r} is invalid: expected {N_INPUT} finite plant inputs")
-        state, force = _chunk(self.params, self.dt, n)(self._state, u)
-        self._state = np.asarray(state, dtype=float).ravel()
+        if n < 1:
+            raise ValueError(f"n = {n!r} is invalid: expected at least one step")
+        state = self._state
+        for size in [CHUNK] * (n // CHUNK) + [1] * (n % CHUNK):
+            state, force = self._chunks[size](state, u, self._p, self.dt)
+            state = np.asarray(state, dtype=float).ravel()
+        self._state = state
         force = np.asarray(force, dtype=float).ravel()
         self._force = (self._state.copy(), u.copy(), (float(force[0]), float(force[1])))
         self._t += n * self.dt
@@ -158,13 +176,13 @@ class VehiclePlant:
 
     def derivatives(self, state: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Ẋ at (state, u)."""
-        return np.asarray(self._f(state, u)[0], dtype=float).ravel()
+        return np.asarray(self._f(state, u, self._p)[0], dtype=float).ravel()
 
     def imu_specific_force(self, state: np.ndarray, u: np.ndarray) -> tuple[float, float]:
         """Body specific force (a_x, a_y) = (v̇_x − v_y γ, v̇_y + v_x γ) an IMU at the CoG measures."""
         if self._force is not None and np.array_equal(self._force[0], state) and np.array_equal(self._force[1], u):
             return self._force[2]
-        force = np.asarray(self._f(state, u)[1], dtype=float).ravel()
+        force = np.asarray(self._f(state, u, self._p)[1], dtype=float).ravel()
         return float(force[0]), float(force[1])
 
 
