@@ -31,9 +31,12 @@ def run(config: Config, table: MaxSteeringTable, name: str, planner: str, seed: 
     return summarize(simulate(config, load_scenario(name), planner=planner, seed=seed, table=table))
 
 
+@pytest.mark.parametrize("seed", [0, 1])
 @pytest.mark.parametrize("name", NINE)
-def test_paper_case_is_collision_free_and_inside_the_field(config: Config, table: MaxSteeringTable, name: str) -> None:
-    s = run(config, table, name, "combined")
+def test_paper_case_is_collision_free_and_inside_the_field(
+    config: Config, table: MaxSteeringTable, name: str, seed: int
+) -> None:
+    s = run(config, table, name, "combined", seed)
     assert not s["collided"], s
     assert not s["left_field"], s
     assert s["min_clearance_m"] > 0.0
@@ -52,7 +55,7 @@ def test_extreme_case_combined_succeeds_where_mpc_alone_fails_or_overreacts(
     delta_max = config.vehicle.delta_max
     mpc_failed = mpc["collided"] or mpc["left_field"]
     mpc_overreacted = mpc["max_abs_steer_rad"] >= 0.95 * delta_max and (
-        mpc["max_lateral_offset_m"] > 1.5 * combined["max_lateral_offset_m"]
+        mpc["max_lateral_offset_m"] > 1.3 * combined["max_lateral_offset_m"]
     )
     assert mpc_failed or mpc_overreacted, (mpc, combined)
 

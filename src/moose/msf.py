@@ -43,7 +43,7 @@ class MsfParams:
     t_s: float = 0.2
     a_x_max: float = 6.0
     a_y_max: float = 6.0
-    margin: float = 0.3
+    margin: float = 0.5
     """Lateral margin beyond the far edge (m)."""
     omega_evade: float = 2.5
     """Natural frequency of the lateral tracking law while evading (rad/s)."""
@@ -51,7 +51,7 @@ class MsfParams:
     """Natural frequency of the lane return (rad/s)."""
     k_speed: float = 0.5
     """Speed-tracking gain (1/s)."""
-    reach_fraction: float = 0.75
+    reach_fraction: float = 0.6
     """The scaled maneuver reaches w + margin after this fraction of τ (early, like a driver)."""
 
     def __post_init__(self) -> None:

@@ -16,6 +16,9 @@ is the MSF planner's lane-keeping law (the MPC's barrier problem has nothing
 to avoid, and its iteration-capped lane-keeping solutions only add noise).  The blend
 [v̇_X*, v̇_Y*] = w_MPC·MPC + (1 − w_MPC)·MSF is applied row by row over the
 horizon; shifted by one step it is the MPC's next initial guess (Fig. 3).
+Capped solutions of a 10-iteration solver jump between planning steps, so a
+usable MPC's weight is low-pass filtered across steps (``smoothing``); a failed
+or late solve still drops to 0 at once.
 """
 from __future__ import annotations
 
@@ -41,9 +44,12 @@ class WeightParams:
     tau_slope: float = 0.2
     nu_0: float = 0.7
     nu_slope: float = 0.08
+    smoothing: float = 0.5
+    """Share of the new value in the first-order filter of w_MPC across planning steps (1: no filter)."""
 
     def __post_init__(self) -> None:
         check("capped_factor", self.capped_factor, unit_interval, "a factor in [0, 1]")
+        check("smoothing", self.smoothing, lambda v: 0.0 < v <= 1.0, "a share in (0, 1]")
         for name in ("rho_0", "rho_slope", "tau_0", "tau_slope", "nu_0", "nu_slope"):
             check(name, getattr(self, name), positive, "a positive number")
 
@@ -62,6 +68,10 @@ class WeightFunction:
         self.params = params
         self.vehicle = vehicle
         self._fbl = FeedbackLinearization(FblParams(), vehicle)
+        self._previous: Optional[float] = None
+
+    def reset(self) -> None:
+        self._previous = None
 
     def weight(self, mpc: PlanResult, threat: Optional[Threat], estimate: StateEstimate) -> float:
         """w_MPC in [0, 1]."""
@@ -77,6 +87,10 @@ class WeightFunction:
 
     def blend(self, mpc: PlanResult, msf: PlanResult, threat: Optional[Threat], estimate: StateEstimate) -> Blend:
         w = self.weight(mpc, threat, estimate)
+        if w > 0.0 and self._previous is not None:
+            # a usable MPC solution's share changes gradually; a failed one drops out at once
+            w = self._previous + self.params.smoothing * (w - self._previous)
+        self._previous = w
         mpc_accel = np.nan_to_num(mpc.accel) if w > 0.0 else np.zeros_like(msf.accel)
         return Blend(weight_mpc=w, accel=w * mpc_accel + (1.0 - w) * msf.accel)
 
