@@ -112,6 +112,40 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _ros() -> Any:
+    try:
+        import moose_ros.launch
+        import moose_ros.nodes
+    except ImportError as exc:
+        raise ParamError(f"the node graph needs the moose_ros package (pip install -e ros2_ws/src/moose_ros): {exc}") from None
+    return moose_ros
+
+
+def cmd_node(args: argparse.Namespace) -> int:
+    ros = _ros()
+    argv = (["--params", args.params] if args.params else []) + [a for p in args.param for a in ("--param", p)]
+    return int(ros.nodes.run(args.name, argv))
+
+
+def cmd_launch(args: argparse.Namespace) -> int:
+    ros = _ros()
+    scenario = scenario_from_args(args)
+    if args.speed is not None:
+        params = {"speed": args.speed, "tau": args.tau, "obstacle_half_width": args.obstacle_half_width,
+                  "obstacle_length": args.obstacle_length}
+    else:
+        params = {"scenario": args.scenario or DEFAULT_SCENARIO}
+    params.update({k: v for k, v in (("duration", args.duration), ("mu", args.mu)) if v is not None})
+    summary = ros.launch.launch(scenario, params, graph=args.graph, planner=args.planner or "combined", seed=args.seed,
+                                params_file=args.config, rate=args.rate)
+    print(format_summary(summary))
+    print(f"node exits      {summary['node_exits']}")
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="moose", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -120,6 +154,18 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--json", help="write the summary as JSON to this path")
     simulate.add_argument("--plot", help="write the paper-style figure (PNG) to this path")
     simulate.set_defaults(handler=cmd_simulate)
+    node = sub.add_parser("node", help="run one node of the graph (Cyclone DDS, or rclpy when installed)")
+    node.add_argument("name", help="observer, obstacle_detector, mpc_planner, msf_planner, weight_fbl, "
+                                   "motion_controller or vehicle_simulator")
+    node.add_argument("--params", help="ROS 2 parameter file")
+    node.add_argument("--param", action="append", default=[], help="parameter override key=value")
+    node.set_defaults(handler=cmd_node)
+    launch = sub.add_parser("launch", help="run the whole node graph as separate processes")
+    launch.add_argument("graph", nargs="?", default="full", choices=["full", "car"], help="full (with simulator) or car")
+    add_scenario_arguments(launch)
+    launch.add_argument("--rate", type=_positive_float, default=1.0, help="simulated seconds per wall-clock second")
+    launch.add_argument("--json", help="write the summary as JSON to this path")
+    launch.set_defaults(handler=cmd_launch)
     return parser
 
 

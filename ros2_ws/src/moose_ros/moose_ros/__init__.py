@@ -1,0 +1,1 @@
+"""ROS 2 node graph of the moose-test collision avoidance (rclpy or Cyclone DDS)."""

@@ -1,0 +1,162 @@
+"""Message types for the DDS path, generated from the `.msg` files — never written by hand.
+
+Definitions come from two places only: the ``.msg`` files of ``moose_msgs`` (ours) and
+rosbags' bundled ROS 2 Jazzy type store (standard messages).  From these, Cyclone DDS
+``IdlStruct`` classes are built at import time with the type names rmw_cyclonedds uses
+(``pkg::msg::dds_::Type_``), so their CDR on the wire is what a ROS 2 node sends and
+receives.  Instances are plain dataclasses: fields by their ``.msg`` names, defaults
+zero/empty, nested messages constructed by default.
+"""
+from __future__ import annotations
+
+import dataclasses
+import os
+import types as pytypes
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import cyclonedds.idl.types as idl
+from cyclonedds.idl import IdlStruct
+from rosbags.interfaces import Nodetype
+from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+
+MSG_PACKAGE = "moose_msgs"
+
+_BASE = {
+    "bool": (bool, False), "byte": (idl.byte, 0), "char": (idl.uint8, 0),
+    "int8": (idl.int8, 0), "uint8": (idl.uint8, 0), "int16": (idl.int16, 0), "uint16": (idl.uint16, 0),
+    "int32": (idl.int32, 0), "uint32": (idl.uint32, 0), "int64": (idl.int64, 0), "uint64": (idl.uint64, 0),
+    "float32": (idl.float32, 0.0), "float64": (idl.float64, 0.0), "string": (str, ""),
+}
+
+
+def msg_dir() -> Path:
+    """Folder of our ``.msg`` files: $MOOSE_MSG_DIR, the ament index, or the source tree."""
+    env = os.environ.get("MOOSE_MSG_DIR")
+    if env:
+        return Path(env)
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        return Path(get_package_share_directory(MSG_PACKAGE)) / "msg"
+    except Exception:  # noqa: BLE001 - no ROS 2 here: use the repository layout
+        return Path(__file__).resolve().parents[2] / MSG_PACKAGE / "msg"
+
+
+@lru_cache(maxsize=1)
+def typestore() -> Any:
+    """rosbags type store: ROS 2 Jazzy's standard messages plus ours."""
+    store = get_typestore(Stores.ROS2_JAZZY)
+    folder = msg_dir()
+    files = sorted(folder.glob("*.msg"))
+    if not files:
+        raise FileNotFoundError(f"no .msg files in {folder}: set MOOSE_MSG_DIR to moose_msgs/msg")
+    definitions: dict[str, Any] = {}
+    for path in files:
+        definitions.update(get_types_from_msg(path.read_text(encoding="utf-8"), f"{MSG_PACKAGE}/msg/{path.stem}"))
+    store.register(definitions)
+    return store
+
+
+def dds_type_name(type_name: str) -> str:
+    """``pkg/msg/Type`` → ``pkg::msg::dds_::Type_`` (rmw_cyclonedds)."""
+    pkg, kind, name = type_name.split("/")
+    return f"{pkg}::{kind}::dds_::{name}_"
+
+
+def _field_type(node: tuple) -> tuple[Any, Any]:
+    """IDL annotation and default factory for a rosbags field node."""
+    kind, detail = node
+    if kind == Nodetype.BASE:
+        base, _bound = detail
+        annotation, default = _BASE[base]
+        return annotation, (lambda d=default: d)
+    if kind == Nodetype.NAME:
+        cls = message_class(detail)
+        return cls, cls
+    element, size = detail
+    inner, inner_default = _field_type(element)
+    if kind == Nodetype.ARRAY:
+        return idl.array[inner, size], (lambda f=inner_default, n=size: [f() for _ in range(n)])
+    return (idl.sequence[inner, size] if size else idl.sequence[inner]), list
+
+
+@lru_cache(maxsize=None)
+def message_class(type_name: str) -> type:
+    """The DDS dataclass of ``pkg/msg/Type``; raises KeyError naming an unknown type."""
+    store = typestore()
+    if type_name not in store.fielddefs:
+        raise KeyError(f"message type {type_name!r} is unknown (not a standard ROS 2 Jazzy type nor in {msg_dir()})")
+    constants, fields = store.fielddefs[type_name]
+    annotations: dict[str, Any] = {}
+    defaults: dict[str, Any] = {}
+    for name, node in fields:
+        annotation, factory = _field_type(node)
+        annotations[name] = annotation
+        defaults[name] = dataclasses.field(default_factory=factory)
+
+    def body(namespace: dict[str, Any]) -> None:
+        namespace["__annotations__"] = annotations
+        namespace.update(defaults)
+
+    cls = pytypes.new_class(type_name.split("/")[-1], (IdlStruct,), {"typename": dds_type_name(type_name)}, body)
+    cls = dataclasses.dataclass(cls)
+    for const_name, _kind, value in constants:
+        setattr(cls, const_name, value)
+    cls.ros_type = type_name  # type: ignore[attr-defined]
+    return cls
+
+
+def make(type_name: str, **fields: Any) -> Any:
+    """A message of ``type_name`` with the given fields (others default)."""
+    return message_class(type_name)(**fields)
+
+
+def to_rosbags(msg: Any) -> Any:
+    """The same content as a rosbags message (for ``serialize_cdr`` and bag writing)."""
+    store = typestore()
+    type_name = type(msg).ros_type
+    cls = store.types[type_name]
+    _, fields = store.fielddefs[type_name]
+    values = {}
+    for name, node in fields:
+        values[name] = _convert_out(getattr(msg, name), node, store)
+    return cls(**values)
+
+
+def _convert_out(value: Any, node: tuple, store: Any) -> Any:
+    import numpy as np
+
+    kind, detail = node
+    if kind == Nodetype.BASE:
+        return value
+    if kind == Nodetype.NAME:
+        return to_rosbags(value)
+    element, _size = detail
+    if element[0] == Nodetype.BASE and element[1][0] != "string":
+        dtype = {"bool": np.bool_, "byte": np.uint8, "char": np.uint8}.get(element[1][0], element[1][0])
+        return np.array(value, dtype=dtype)
+    return [_convert_out(v, element, store) for v in value]
+
+
+def from_rosbags(msg: Any, type_name: str) -> Any:
+    """A DDS message from a rosbags message (bag replay)."""
+    store = typestore()
+    _, fields = store.fielddefs[type_name]
+    values = {}
+    for name, node in fields:
+        values[name] = _convert_in(getattr(msg, name), node)
+    return message_class(type_name)(**values)
+
+
+def _convert_in(value: Any, node: tuple) -> Any:
+    kind, detail = node
+    if kind == Nodetype.BASE:
+        return value
+    if kind == Nodetype.NAME:
+        return from_rosbags(value, detail)
+    element, _size = detail
+    if element[0] == Nodetype.BASE:
+        return [v.item() if hasattr(v, "item") else v for v in value]
+    return [_convert_in(v, element) for v in value]
