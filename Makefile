@@ -7,9 +7,9 @@ STAMP  := $(VENV)/.installed
 
 .PHONY: run test bench clean
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml ros2_ws/src/moose_ros/setup.py
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m pip install --quiet -e '.[test]' -e ros2_ws/src/moose_ros
 	touch $(STAMP)
 
 run: $(STAMP)
@@ -21,6 +21,7 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python bench/bench_mpc.py
 	$(BIN)/python bench/bench_closed_loop.py
+	$(BIN)/python bench/bench_graph.py
 
 clean:
 	rm -rf $(VENV) runs

@@ -147,8 +147,10 @@ def launch(
                     if name != "vehicle_simulator":
                         with lock:
                             out.write(f"[launch] node {name} exited with status {code}; the graph keeps running\n")
-            if "vehicle_simulator" in exits or monitor.finished:
+            if "vehicle_simulator" in exits or (graph == "car" and monitor.finished):
                 break
+            if monitor.finished:
+                limit = min(limit, time.monotonic() + 5.0)  # the simulator is closing down
         for _ in range(10):  # let the last messages arrive
             node.spin_once(0.02)
     finally:

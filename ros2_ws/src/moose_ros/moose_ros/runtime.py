@@ -6,9 +6,10 @@ API (both backends): ``publisher(type, topic, qos)``, ``subscription(type, topic
 ``.msg`` field names on both backends.
 
 The DDS backend follows rmw_cyclonedds: topic ``/x`` is DDS topic ``rt/x``, type names
-``pkg::msg::dds_::Type_``, CDR (XCDR1) encoding, domain from ``ROS_DOMAIN_ID``.  DDS
-listeners only enqueue samples; callbacks and timers run in ``spin`` on one thread, like
-rclpy's single-threaded executor.  With ``use_sim_time`` the clock follows ``/clock``
+``pkg::msg::dds_::Type_``, CDR (XCDR1) encoding, domain from ``ROS_DOMAIN_ID``.  One
+thread per node waits on a DDS WaitSet and only enqueues samples (a DDS listener that
+takes samples can deadlock against a write from the same participant); callbacks and
+timers run in ``spin`` on one thread, like rclpy's single-threaded executor.  With ``use_sim_time`` the clock follows ``/clock``
 and timers fire on simulated time.
 """
 from __future__ import annotations
@@ -109,6 +110,9 @@ class DdsNode(_NodeBase):
         self._timers: list[_Timer] = []
         self._topics: dict[str, Any] = {}
         self._keep: list[Any] = []
+        self._readers: list[tuple[Any, Callable[[Any], None], type, Any]] = []
+        self._readers_lock = threading.Lock()
+        self._waitset: Any = None
         self._stop = threading.Event()
         self._sim_now: Optional[float] = None
         if self.use_sim_time:
@@ -155,18 +159,30 @@ class DdsNode(_NodeBase):
         return publish
 
     def subscription(self, type_name: str, topic: str, callback: Callable[[Any], None], qos: Qos = QOS_DEFAULT) -> None:
-        from cyclonedds.core import Listener
+        from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
         from cyclonedds.sub import DataReader
 
-        node = self
+        reader = DataReader(self.participant, self._topic(type_name, topic), qos=self._qos(qos))
+        if self._waitset is None:
+            self._waitset = WaitSet(self.participant)
+            threading.Thread(target=self._take_loop, name=f"{self.name}-dds", daemon=True).start()
+        condition = ReadCondition(reader, SampleState.Any | ViewState.Any | InstanceState.Any)
+        with self._readers_lock:
+            self._readers.append((reader, callback, message_class(type_name), condition))
+            self._waitset.attach(condition)
 
-        class _Listener(Listener):  # type: ignore[misc]
-            def on_data_available(self, reader: Any) -> None:
-                for sample in reader.take(N=64):
-                    node._queue.put((callback, sample))
+    def _take_loop(self) -> None:
+        """Wait on all readers and hand samples to the executor (never calls back inside DDS)."""
+        from cyclonedds.util import duration
 
-        reader = DataReader(self.participant, self._topic(type_name, topic), qos=self._qos(qos), listener=_Listener())
-        self._keep.append(reader)
+        while not self._stop.is_set():
+            self._waitset.wait(duration(milliseconds=50))
+            with self._readers_lock:
+                readers = list(self._readers)
+            for reader, callback, cls, _ in readers:
+                for sample in reader.take(N=256):
+                    if isinstance(sample, cls):  # skip dispose/unregister notifications
+                        self._queue.put((callback, sample))
 
     def timer(self, period: float, callback: Callable[[], None]) -> None:
         self._timers.append(_Timer(period, callback, self.now()))

@@ -1,0 +1,21 @@
+"""Test-run isolation: a DDS domain of our own on loopback only, and a private compile cache."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+
+@pytest.fixture(scope="session", autouse=True)
+def dds_loopback(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """Unique ROS_DOMAIN_ID per test run; Cyclone DDS bound to the loopback interface."""
+    config = tmp_path_factory.mktemp("dds") / "cyclonedds.xml"
+    config.write_text(
+        '<CycloneDDS><Domain Id="any"><General><Interfaces><NetworkInterface name="lo"/></Interfaces>'
+        "<AllowMulticast>spdp</AllowMulticast></General></Domain></CycloneDDS>"
+    )
+    os.environ["ROS_DOMAIN_ID"] = str(1 + os.getpid() % 200)
+    os.environ["CYCLONEDDS_URI"] = config.as_uri()
+    os.environ["MOOSE_RUNTIME"] = "dds"
+    os.environ.setdefault("MOOSE_CACHE_DIR", str(Path.home() / ".cache" / "moose"))

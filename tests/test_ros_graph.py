@@ -1,0 +1,184 @@
+"""The node graph as separate processes on Cyclone DDS (loopback, own domain, bounded in time)."""
+import io
+import subprocess
+import sys
+import textwrap
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cyclonedds.idl.types as t
+import pytest
+from cyclonedds.core import Policy, Qos
+from cyclonedds.domain import DomainParticipant
+from cyclonedds.util import duration
+from cyclonedds.idl import IdlStruct
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
+
+from moose.metrics import summarize
+from moose.params import ParamError
+from moose.scenario import load_scenario
+from moose.simulation import simulate
+from moose.config import load_config
+from moose_ros.launch import launch
+from moose_ros.runtime import DdsNode
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+# -- an independent, hand-written nav_msgs/Odometry as any plain Cyclone DDS program would declare it
+@dataclass
+class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
+    sec: t.int32 = 0
+    nanosec: t.uint32 = 0
+
+
+@dataclass
+class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
+    stamp: Time = field(default_factory=Time)
+    frame_id: str = ""
+
+
+@dataclass
+class Point(IdlStruct, typename="geometry_msgs::msg::dds_::Point_"):
+    x: t.float64 = 0.0
+    y: t.float64 = 0.0
+    z: t.float64 = 0.0
+
+
+@dataclass
+class Quaternion(IdlStruct, typename="geometry_msgs::msg::dds_::Quaternion_"):
+    x: t.float64 = 0.0
+    y: t.float64 = 0.0
+    z: t.float64 = 0.0
+    w: t.float64 = 1.0
+
+
+@dataclass
+class Pose(IdlStruct, typename="geometry_msgs::msg::dds_::Pose_"):
+    position: Point = field(default_factory=Point)
+    orientation: Quaternion = field(default_factory=Quaternion)
+
+
+@dataclass
+class PoseWithCovariance(IdlStruct, typename="geometry_msgs::msg::dds_::PoseWithCovariance_"):
+    pose: Pose = field(default_factory=Pose)
+    covariance: t.array[t.float64, 36] = field(default_factory=lambda: [0.0] * 36)
+
+
+@dataclass
+class Vector3(IdlStruct, typename="geometry_msgs::msg::dds_::Vector3_"):
+    x: t.float64 = 0.0
+    y: t.float64 = 0.0
+    z: t.float64 = 0.0
+
+
+@dataclass
+class Twist(IdlStruct, typename="geometry_msgs::msg::dds_::Twist_"):
+    linear: Vector3 = field(default_factory=Vector3)
+    angular: Vector3 = field(default_factory=Vector3)
+
+
+@dataclass
+class TwistWithCovariance(IdlStruct, typename="geometry_msgs::msg::dds_::TwistWithCovariance_"):
+    twist: Twist = field(default_factory=Twist)
+    covariance: t.array[t.float64, 36] = field(default_factory=lambda: [0.0] * 36)
+
+
+@dataclass
+class Odometry(IdlStruct, typename="nav_msgs::msg::dds_::Odometry_"):
+    header: Header = field(default_factory=Header)
+    child_frame_id: str = ""
+    pose: PoseWithCovariance = field(default_factory=PoseWithCovariance)
+    twist: TwistWithCovariance = field(default_factory=TwistWithCovariance)
+
+
+PUBLISHER = textwrap.dedent("""
+    import math, sys, time
+    from moose_ros.runtime import create_node, QOS_DEFAULT
+    from moose_ros import convert as cv
+    import numpy as np
+    node = create_node("odom_source")
+    pub = node.publisher("nav_msgs/msg/Odometry", "/vehicle/odom", QOS_DEFAULT)
+    time.sleep(1.0)  # discovery
+    for k in range(100):
+        pub(cv.odometry_to_msg(node, 0.01 * k, np.array([0.1 * k, 2.0, 0.3, 7.0, 0.1, 0.05])))
+        time.sleep(0.01)
+    time.sleep(0.5)
+""")
+
+
+def test_plain_cyclone_reader_receives_odometry_from_another_process() -> None:
+    participant = DomainParticipant(int(__import__("os").environ["ROS_DOMAIN_ID"]))
+    qos = Qos(Policy.Reliability.Reliable(duration(milliseconds=100)), Policy.History.KeepLast(200))
+    reader = DataReader(participant, Topic(participant, "rt/vehicle/odom", Odometry), qos=qos)
+    proc = subprocess.Popen([sys.executable, "-c", PUBLISHER])
+    samples = []
+    deadline = time.monotonic() + 20.0
+    try:
+        while time.monotonic() < deadline and proc.poll() is None:
+            samples.extend(s for s in reader.take(N=100) if isinstance(s, Odometry))
+            time.sleep(0.02)
+        samples.extend(s for s in reader.take(N=100) if isinstance(s, Odometry))
+    finally:
+        proc.kill()
+        proc.wait()
+    assert len(samples) >= 90  # reliable QoS on loopback: (nearly) all 100 arrive
+    last = samples[-1]
+    assert last.header.frame_id == "odom" and last.child_frame_id == "base_link"
+    assert last.pose.pose.position.y == 2.0 and last.twist.twist.linear.x == 7.0
+    assert last.pose.pose.orientation.z == pytest.approx(0.14943813)  # sin(0.15)
+    assert [s.pose.pose.position.x for s in samples] == sorted(s.pose.pose.position.x for s in samples)
+
+
+def test_full_graph_reproduces_the_lockstep_outcome() -> None:
+    scenario = load_scenario("paper_v7_tau1.4")
+    lockstep = summarize(simulate(load_config(), scenario, "combined"))
+    out = io.StringIO()
+    summary = launch(scenario, {"scenario": "paper_v7_tau1.4"}, out=out)
+    log = out.getvalue()
+    for node in ("observer", "obstacle_detector", "mpc_planner", "msf_planner", "weight_fbl", "motion_controller",
+                 "vehicle_simulator"):
+        assert f"[{node}]" in log and f"{node} started" in log
+    assert summary["node_exits"]["vehicle_simulator"] == 0
+    assert summary["odom_samples"] > 500
+    assert summary["collided"] is lockstep["collided"] is False
+    assert summary["left_field"] is lockstep["left_field"] is False
+    assert summary["nu"] == pytest.approx(lockstep["nu"], abs=0.05)
+    assert summary["mpc_solve_ms"]["count"] >= 40
+
+
+def test_killed_planner_is_reported_and_the_graph_keeps_running() -> None:
+    scenario = load_scenario("paper_v6_w2.0")
+    out = io.StringIO()
+    summary = launch(scenario, {"scenario": "paper_v6_w2.0", "duration": 4.0},
+                     kill_after=("mpc_planner", 4.0), out=out)
+    assert summary["node_exits"]["mpc_planner"] == -9
+    assert "node mpc_planner exited with status -9" in out.getvalue()
+    assert summary["diagnostics"]["weight_fbl"]["level"] == 1
+    assert "mpc_planner silent" in summary["diagnostics"]["weight_fbl"]["message"]
+    assert summary["node_exits"]["vehicle_simulator"] == 0  # the run still finished
+    assert not summary["collided"]
+
+
+def test_bad_input_gives_clear_errors(tmp_path: Path) -> None:
+    moose = [sys.executable, "-m", "moose.cli"]
+    unknown = subprocess.run(moose + ["node", "autopilot"], capture_output=True, text=True, timeout=60)
+    assert unknown.returncode == 2 and "node 'autopilot' is unknown" in unknown.stderr
+    missing = subprocess.run(moose + ["node", "observer", "--params", str(tmp_path / "no.yaml")],
+                             capture_output=True, text=True, timeout=60)
+    assert missing.returncode == 2 and "no such file" in missing.stderr
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("/**:\n  ros__parameters:\n    vehicle: {m: heavy}\n")
+    wrong = subprocess.run(moose + ["node", "observer", "--params", str(bad)], capture_output=True, text=True, timeout=60)
+    assert wrong.returncode == 2 and "vehicle.m = 'heavy'" in wrong.stderr
+    node = DdsNode("typo_check")
+    publish = node.publisher("nav_msgs/msg/Odometry", "/vehicle/odom")
+    with pytest.raises(TypeError, match="carries 'nav_msgs/msg/Odometry'"):
+        publish(node.make("sensor_msgs/msg/Imu"))
+    with pytest.raises(TypeError, match="already used with type"):
+        node.publisher("sensor_msgs/msg/Imu", "/vehicle/odom")
+    with pytest.raises(ParamError, match="no such file"):
+        from moose_ros.runtime import create_node
+        create_node("x", str(tmp_path / "none.yaml"))
