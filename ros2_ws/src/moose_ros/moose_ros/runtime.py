@@ -248,6 +248,12 @@ class RclpyNode(_NodeBase):
             rclpy.init(args=args)
         self._rclpy = rclpy
         self.node = Node(name, automatically_declare_parameters_from_overrides=True)
+        for dotted, parameter in self.node.get_parameters_by_prefix("").items():
+            target = self._params
+            *groups, leaf = dotted.split(".")
+            for group in groups:
+                target = target.setdefault(group, {})
+            target[leaf] = parameter.value
         if self.node.has_parameter("use_sim_time"):
             self.use_sim_time = bool(self.node.get_parameter("use_sim_time").value)
         self._stop = False

@@ -1,0 +1,46 @@
+"""ROS 2 launch of the moose graph: `ros2 launch moose_ros moose_graph.launch.py [group:=all|perception|planning|control|vehicle]`.
+
+Groups mirror the vehicle's ECUs: perception (observer, obstacle detector), planning
+(MPC, MSF, weight function + FBL; the MicroLabBox), control (motion controller; the
+AutoBox), vehicle (the plant simulator, replaced by the CAN bridge on the car).
+"""
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+GROUPS = {
+    "perception": ["observer", "obstacle_detector"],
+    "planning": ["mpc_planner", "msf_planner", "weight_fbl"],
+    "control": ["motion_controller"],
+    "vehicle": ["vehicle_simulator"],
+}
+
+
+def nodes(context, *args, **kwargs):
+    group = LaunchConfiguration("group").perform(context)
+    names = [n for g in GROUPS.values() for n in g] if group == "all" else GROUPS[group]
+    if LaunchConfiguration("with_simulator").perform(context) != "true":
+        names = [n for n in names if n != "vehicle_simulator"]
+    params_file = LaunchConfiguration("params_file").perform(context)
+    common = {
+        "scenario": LaunchConfiguration("scenario").perform(context),
+        "planner": LaunchConfiguration("planner").perform(context),
+    }
+    return [
+        Node(package="moose_ros", executable=name, name=name, output="screen",
+             parameters=[params_file, dict(common, use_sim_time=name != "vehicle_simulator")] if params_file
+             else [dict(common, use_sim_time=name != "vehicle_simulator")])
+        for name in names
+    ]
+
+
+def generate_launch_description():
+    return LaunchDescription([
+        DeclareLaunchArgument("group", default_value="all", choices=["all", *GROUPS]),
+        DeclareLaunchArgument("with_simulator", default_value="true", choices=["true", "false"]),
+        DeclareLaunchArgument("scenario", default_value="paper_v7_tau1.4"),
+        DeclareLaunchArgument("planner", default_value="combined", choices=["combined", "mpc", "msf"]),
+        DeclareLaunchArgument("params_file", default_value=""),
+        OpaqueFunction(function=nodes),
+    ])

@@ -1,0 +1,46 @@
+"""The Docker image and compose file stay consistent with the workspace (they cannot be run here)."""
+from __future__ import annotations
+
+import ast
+import re
+from pathlib import Path
+
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+WORKSPACE = ROOT / "ros2_ws" / "src"
+
+
+def packages() -> set[str]:
+    return {p.parent.name for p in WORKSPACE.glob("*/package.xml")}
+
+
+def test_dockerfile_builds_every_workspace_package_on_jazzy() -> None:
+    text = (ROOT / "docker" / "Dockerfile").read_text()
+    assert re.search(r"^FROM ros:jazzy", text, re.M)
+    selected = set(re.search(r"--packages-select ([\w ]+)", text).group(1).split())
+    assert selected == packages() == {"moose_msgs", "moose_ros"}
+    assert "COPY ros2_ws/src" in text and "colcon build" in text
+    for path in re.findall(r"^COPY (\S+) ", text, re.M):
+        assert (ROOT / path).exists(), path
+    assert "pip install" in text and "COPY src ./src" in text  # the core is installed from the copied source
+
+
+def test_compose_services_launch_existing_groups_and_executables() -> None:
+    compose = yaml.safe_load((ROOT / "docker" / "compose.yaml").read_text())
+    launch_file = WORKSPACE / "moose_ros" / "launch" / "moose_graph.launch.py"
+    groups = ast.literal_eval(re.search(r"GROUPS = (\{.*?\n\})", launch_file.read_text(), re.S).group(1))
+    setup = (WORKSPACE / "moose_ros" / "setup.py").read_text()
+    executables = set(ast.literal_eval(re.search(r"NODES = (\[.*?\])", setup, re.S).group(1)))
+    assert {n for g in groups.values() for n in g} == executables
+    services = compose["services"]
+    assert set(services) == set(groups)
+    for name, service in services.items():
+        assert service["command"][:4] == ["ros2", "launch", "moose_ros", "moose_graph.launch.py"]
+        assert service["command"][4] == f"group:={name}"
+
+
+def test_msg_package_lists_every_message_file() -> None:
+    cmake = (WORKSPACE / "moose_msgs" / "CMakeLists.txt").read_text()
+    listed = set(re.findall(r'"msg/(\w+)\.msg"', cmake))
+    assert listed == {p.stem for p in (WORKSPACE / "moose_msgs" / "msg").glob("*.msg")}
