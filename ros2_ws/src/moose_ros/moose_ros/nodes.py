@@ -297,7 +297,11 @@ class WeightFbl(GraphNode):
 
 
 class Motion(GraphNode):
-    """Motion controller at 100 Hz: PI speed control, TDL, feedback EPS → actuator command."""
+    """Motion controller: PI speed control, TDL, feedback EPS → actuator command.
+
+    Runs on every state estimate (100 Hz, the IMU rate) rather than on its own timer, so
+    a command follows its sensor sample by one observer hop, as in the lockstep loop.
+    """
 
     name = "motion_controller"
 
@@ -308,21 +312,18 @@ class Motion(GraphNode):
         self.reference: Optional[Reference] = None
         self.delta = 0.0
         self.pub = rt.publisher("moose_msgs/msg/ActuatorCommand", "/control/actuator_command", QOS_DEFAULT)
-        rt.subscription("moose_msgs/msg/StateEstimate", "/perception/state",
-                        lambda m: setattr(self, "estimate", cv.estimate_from_msg(m)), QOS_DEFAULT)
+        rt.subscription("moose_msgs/msg/StateEstimate", "/perception/state", self.on_state, QOS_DEFAULT)
         rt.subscription("moose_msgs/msg/Reference", "/control/reference",
                         lambda m: setattr(self, "reference", cv.reference_from_msg(m)), QOS_DEFAULT)
         rt.subscription("moose_msgs/msg/SteeringReport", "/vehicle/steering",
                         lambda m: setattr(self, "delta", m.delta), QOS_SENSOR)
         self.dt = 1.0 / self.config.simulation.motion_rate_hz
-        rt.timer(self.dt, self.step)
 
-    def step(self) -> None:
-        if self.estimate is None:
-            return
+    def on_state(self, msg: Any) -> None:
+        self.estimate = cv.estimate_from_msg(msg)
         reference = self.reference or Reference(0.0, self.estimate.vx)
         u = self.controller.step(reference, self.estimate, self.delta, self.dt)
-        self.pub(cv.actuator_to_msg(self.rt, self.rt.now(), reference, u))
+        self.pub(cv.actuator_to_msg(self.rt, self.estimate.t, reference, u))
 
 
 NODES: dict[str, Callable[[Any], GraphNode]] = {
