@@ -48,7 +48,12 @@ class CompiledFunction:
 
     def __call__(self, *args: np.ndarray) -> list[np.ndarray]:
         for buffer, value in zip(self._inputs, args):
-            buffer[:] = np.ravel(value, order="F")
+            if isinstance(value, (float, int)):
+                buffer[0] = value
+            elif value.ndim > 1:
+                buffer[:] = value.ravel(order="F")
+            else:
+                buffer[:] = value
         if self._call(self._arg, self._res, self._iw, self._wp, 0) != 0:
             raise RuntimeError("compiled CasADi function failed")
         return [r.copy() for r in self._outputs]

@@ -91,10 +91,10 @@ class MotionController:
         error = (v_ref - estimate.vx) / p.r
         feed_forward = self.J_n * slope / p.r
         torque = feed_forward + self.k_p * error + self.k_i * self._integral
-        saturated = abs(torque) >= p.T_max and np.sign(torque) == np.sign(error)
+        saturated = abs(torque) >= p.T_max and torque * error > 0.0
         if not saturated:
             self._integral += error * dt
-        torque = float(np.clip(torque, -p.T_max, p.T_max))
-        delta_ref = float(np.clip(reference.delta, -p.delta_max, p.delta_max))
-        rate = float(np.clip(self.params.k_delta * (delta_ref - delta_measured), -p.delta_rate_max, p.delta_rate_max))
+        torque = min(max(torque, -p.T_max), p.T_max)
+        delta_ref = min(max(reference.delta, -p.delta_max), p.delta_max)
+        rate = min(max(self.params.k_delta * (delta_ref - delta_measured), -p.delta_rate_max), p.delta_rate_max)
         return np.array([rate, torque, torque])

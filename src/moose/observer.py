@@ -23,16 +23,19 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections import deque
-from typing import Union
+from functools import lru_cache
+from typing import Any, Union
 
+import casadi as ca
 import numpy as np
 
+from .ccompile import compile_function
 from .params import VehicleParams, check, non_negative, positive
 from .signals import EpsSample, GpsSample, ImuSample, StateEstimate, WheelSpeedSample
+from .tire import pacejka
+from .vehicle import symbolic_params, vehicle_vector
 
 Sample = Union[ImuSample, GpsSample, WheelSpeedSample, EpsSample]
-_EYE6 = np.eye(6)
-_DIAG6 = np.diag_indices(6)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,11 +71,11 @@ class StateObserver:
     def __init__(self, params: ObserverParams, vehicle: VehicleParams, initial: StateEstimate | None = None) -> None:
         self.params = params
         self.vehicle = vehicle
-        mu = params.mu_model if params.mu_model > 0.0 else vehicle.mu
-        self._fzf = mu * vehicle.Fzf
-        self._fzr = mu * vehicle.Fzr
+        self._mu = params.mu_model if params.mu_model > 0.0 else vehicle.mu
+        self._pv = vehicle_vector(vehicle)
         q = np.array([params.q_position, params.q_position, params.q_yaw, params.q_vx, params.q_vy, params.q_yaw_rate])
         self._q = q**2
+        self._r_imu = np.array([params.r_yaw_rate**2, params.r_lateral_accel**2])
         self.reset(initial or StateEstimate(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
 
     def reset(self, estimate: StateEstimate) -> None:
@@ -88,48 +91,12 @@ class StateObserver:
         return StateEstimate(self._t, float(x[0]), float(x[1]), float(x[2]), float(x[3]), float(x[4]), float(x[5]),
                              float(self._delta))
 
-    # -- model -------------------------------------------------------------
-    def _tyres(self, x: np.ndarray) -> tuple[float, float, float, float, np.ndarray, np.ndarray]:
-        """Axle forces, their slopes and the gradients of the slip angles w.r.t. x̂."""
-        p = self.vehicle
-        vx, vy, gamma = x[3], x[4], x[5]
-        fast = vx > p.v_low
-        v_bar = vx if fast else p.v_low
-        alpha_f = self._delta - (vy + p.lf * gamma) / v_bar
-        alpha_r = -(vy - p.lr * gamma) / v_bar
-        fyf, kf = _pacejka_and_slope(alpha_f, self._fzf, p.By, p.Cy)
-        fyr, kr = _pacejka_and_slope(alpha_r, self._fzr, p.By, p.Cy)
-        dvx_f = (vy + p.lf * gamma) / v_bar**2 if fast else 0.0
-        dvx_r = (vy - p.lr * gamma) / v_bar**2 if fast else 0.0
-        grad_f = np.array([0.0, 0.0, 0.0, dvx_f, -1.0 / v_bar, -p.lf / v_bar])
-        grad_r = np.array([0.0, 0.0, 0.0, dvx_r, -1.0 / v_bar, p.lr / v_bar])
-        return fyf, fyr, kf, kr, grad_f, grad_r
-
+    # -- model (compiled) ----------------------------------------------------
     def _predict(self, dt: float) -> None:
         if dt <= 0.0:
             return
-        p, x = self.vehicle, self._x
-        theta, vx, vy, gamma = x[2], x[3], x[4], x[5]
-        c, s, cd = math.cos(theta), math.sin(theta), math.cos(self._delta)
-        fyf, fyr, kf, kr, gf, gr = self._tyres(x)
-        xdot = np.array([
-            vx * c - vy * s, vx * s + vy * c, gamma, self._ax + vy * gamma,
-            (fyf * cd + fyr) / p.m - vx * gamma, (fyf * cd * p.lf - fyr * p.lr) / p.Izz,
-        ])
-        A = np.zeros((6, 6))
-        A[0, 2], A[0, 3], A[0, 4] = -vx * s - vy * c, c, -s
-        A[1, 2], A[1, 3], A[1, 4] = vx * c - vy * s, s, c
-        A[2, 5] = 1.0
-        A[3, 4], A[3, 5] = gamma, vy
-        A[4] = (kf * cd * gf + kr * gr) / p.m
-        A[4, 3] -= gamma
-        A[4, 5] -= vx
-        A[5] = (kf * cd * p.lf * gf - kr * p.lr * gr) / p.Izz
-        F = _EYE6 + dt * A
-        self._x = x + dt * xdot
-        P = F @ self._P @ F.T
-        P[_DIAG6] += self._q * dt
-        self._P = P
+        self._x, self._P = _ekf()["predict"](self._x, self._P, self._ax, self._delta, dt, self._pv, self._mu, self._q)
+        self._P = self._P.reshape(6, 6, order="F")
 
     def _correct(self, H: np.ndarray, innovation: np.ndarray, R: np.ndarray) -> None:
         """Kalman update with diagonal R, done as sequential scalar updates (exact for independent noise)."""
@@ -156,23 +123,19 @@ class StateObserver:
     def _apply(self, sample: Sample) -> None:
         p, prm = self.vehicle, self.params
         if isinstance(sample, ImuSample):
-            self._predict(sample.t - self._t)
+            dt = max(sample.t - self._t, 0.0)
+            x, P = _ekf()["imu"](self._x, self._P, self._ax, self._delta, dt, sample.yaw_rate, sample.ay,
+                                 self._pv, self._mu, self._q, self._r_imu)
+            self._x, self._P = x, P.reshape(6, 6, order="F")
             self._t = sample.t
             self._ax = sample.ax
-            fyf, fyr, kf, kr, gf, gr = self._tyres(self._x)
-            cd = math.cos(self._delta)
-            H = np.zeros((2, 6))
-            H[0, 5] = 1.0
-            H[1] = (kf * cd * gf + kr * gr) / p.m
-            z = np.array([sample.yaw_rate, sample.ay])
-            h = np.array([self._x[5], (fyf * cd + fyr) / p.m])
-            self._correct(H, z - h, np.diag([prm.r_yaw_rate**2, prm.r_lateral_accel**2]))
         elif isinstance(sample, WheelSpeedSample):
             self._t = max(self._t, sample.t)
-            H = np.zeros((1, 6))
-            H[0, 3] = 1.0
             v_wheels = 0.5 * p.r * (sample.omega_rl + sample.omega_rr)
-            self._correct(H, np.array([v_wheels - self._x[3]]), np.array([[prm.r_wheel_speed**2]]))
+            PHt = self._P[:, 3].copy()  # H = e_vx
+            gain = PHt / (PHt[3] + prm.r_wheel_speed**2)
+            self._x = self._x + gain * (v_wheels - self._x[3])
+            self._P = self._P - np.outer(gain, PHt)
         elif isinstance(sample, EpsSample):
             self._t = max(self._t, sample.t)
             self._delta = sample.delta
@@ -221,7 +184,48 @@ class StateObserver:
         self._t = max(self._t, now)
 
 
-def _pacejka_and_slope(alpha: float, mu_fz: float, B: float, C: float) -> tuple[float, float]:
-    """F = μF_z sin(C atan(Bα)) and dF/dα."""
-    phi = C * math.atan(B * alpha)
-    return mu_fz * math.sin(phi), mu_fz * math.cos(phi) * C * B / (1.0 + (B * alpha) ** 2)
+@lru_cache(maxsize=None)
+def _ekf() -> dict[str, Any]:
+    """Compiled EKF steps, parametric in the vehicle: ``predict`` and ``imu`` (predict + γ, a_y updates).
+
+    The process model is eqs. (trajdef), (eom) with the Pacejka law eq. (fy) on the slip
+    angles eq. (alphas) (speeds bounded below by v_low); Jacobians by CasADi's AD.
+    """
+    x = ca.SX.sym("x", 6)
+    P = ca.SX.sym("P", 6, 6)
+    ax, delta, dt, mu = ca.SX.sym("ax"), ca.SX.sym("delta"), ca.SX.sym("dt"), ca.SX.sym("mu")
+    z_gamma, z_ay = ca.SX.sym("z_gamma"), ca.SX.sym("z_ay")
+    q, r = ca.SX.sym("q", 6), ca.SX.sym("r", 2)
+    pv, p = symbolic_params()
+    theta, vx, vy, gamma = x[2], x[3], x[4], x[5]
+    v_bar = ca.fmax(vx, p.v_low)
+    fyf = pacejka(delta - (vy + p.lf * gamma) / v_bar, mu * p.Fzf, p.By, p.Cy, ops=ca)
+    fyr = pacejka(-(vy - p.lr * gamma) / v_bar, mu * p.Fzr, p.By, p.Cy, ops=ca)
+    lateral = (fyf * ca.cos(delta) + fyr) / p.m  # the IMU's a_y
+    xdot = ca.vertcat(vx * ca.cos(theta) - vy * ca.sin(theta), vx * ca.sin(theta) + vy * ca.cos(theta), gamma,
+                      ax + vy * gamma, lateral - vx * gamma, (fyf * ca.cos(delta) * p.lf - fyr * p.lr) / p.Izz)
+    x_pred = x + dt * xdot
+    F = ca.jacobian(x_pred, x)
+    P_pred = F @ P @ F.T + ca.diag(q * dt)
+    predict = ca.Function("moose_ekf_predict", [x, P, ax, delta, dt, pv, mu, q], [x_pred, P_pred])
+    # sequential scalar updates at the predicted state: gamma, then a_y (linearised)
+    h_ay = ca.Function("h_ay", [x, delta, pv, mu], [lateral])
+    H_ay = ca.jacobian(lateral, x)
+    xs, Ps = x_pred, P_pred
+    for H, innovation, noise in (
+        (ca.DM([[0, 0, 0, 0, 0, 1]]), z_gamma - x_pred[5], r[0]),
+        (ca.substitute(H_ay, x, x_pred), z_ay - h_ay(x_pred, delta, pv, mu), r[1]),
+    ):
+        PHt = Ps @ H.T
+        gain = PHt / (H @ PHt + noise)
+        xs = xs + gain * (innovation - H @ (xs - x_pred))
+        Ps = Ps - gain @ PHt.T
+    imu = ca.Function("moose_ekf_imu", [x, P, ax, delta, dt, z_gamma, z_ay, pv, mu, q, r], [xs, 0.5 * (Ps + Ps.T)])
+    return {name: _compiled(fn) for name, fn in (("predict", predict), ("imu", imu))}
+
+
+def _compiled(fn: ca.Function) -> Any:
+    compiled = compile_function(fn)
+    if compiled is not None:
+        return lambda *args: [np.asarray(v) for v in compiled(*args)]
+    return lambda *args: [np.asarray(v, dtype=float).ravel(order="F") for v in fn(*args)]

@@ -95,7 +95,12 @@ CHUNK = 10
 """Steps per compiled call; longer advances loop over it."""
 
 
-def _symbolic_params() -> tuple[ca.SX, VehicleParams]:
+def vehicle_vector(params: VehicleParams) -> np.ndarray:
+    """The numeric values behind :func:`symbolic_params`."""
+    return np.array([float(getattr(params, name)) for name in PARAM_FIELDS])
+
+
+def symbolic_params() -> tuple[ca.SX, VehicleParams]:
     """A VehicleParams whose fields are CasADi symbols (its derived properties follow)."""
     vector = ca.SX.sym("p", len(PARAM_FIELDS))
     params = object.__new__(VehicleParams)
@@ -110,7 +115,7 @@ def _functions() -> tuple[ca.Function, ca.Function, dict[int, ca.Function | Comp
     s = ca.SX.sym("x", N_STATE)
     u = ca.SX.sym("u", N_INPUT)
     dt = ca.SX.sym("dt")
-    pv, p = _symbolic_params()
+    pv, p = symbolic_params()
     xdot, force = dynamics(s, u, p)
     f = ca.Function("f", [s, u, pv], [xdot, force])
     k1 = f(s, u, pv)[0]
@@ -137,7 +142,7 @@ class VehiclePlant:
         self.params = params
         self.dt = dt
         self._f, _, self._chunks = _functions()
-        self._p = np.array([float(getattr(params, name)) for name in PARAM_FIELDS])
+        self._p = vehicle_vector(params)
         self._state = initial_state(params)
         self._t = 0.0
         self._force: tuple[np.ndarray, np.ndarray, tuple[float, float]] | None = None
