@@ -109,11 +109,30 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         print(f"summary         {path}")
     if args.plot:
         print(f"figure          {plot_result([result], args.plot)}")
+    if not args.no_bag:
+        bag = _ros().bag
+        path = Path(args.bag) if args.bag else run_folder(scenario.name, result.planner) / "bag"
+        bag.record_result(result, path)
+        print(f"bag             {path}")
     return 0
+
+
+def run_folder(scenario: str, planner: str) -> Path:
+    """A new folder under runs/ for this run's outputs."""
+    import time
+
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    base = Path("runs") / f"{stamp}_{scenario}_{planner}"
+    path, n = base, 1
+    while path.exists():
+        n += 1
+        path = Path(f"{base}_{n}")
+    return path
 
 
 def _ros() -> Any:
     try:
+        import moose_ros.bag
         import moose_ros.launch
         import moose_ros.nodes
     except ImportError as exc:
@@ -136,13 +155,77 @@ def cmd_launch(args: argparse.Namespace) -> int:
     else:
         params = {"scenario": args.scenario or DEFAULT_SCENARIO}
     params.update({k: v for k, v in (("duration", args.duration), ("mu", args.mu)) if v is not None})
+    bag = None if args.no_bag else (Path(args.bag) if args.bag else run_folder(scenario.name, args.planner or "combined") / "bag")
     summary = ros.launch.launch(scenario, params, graph=args.graph, planner=args.planner or "combined", seed=args.seed,
-                                params_file=args.config, rate=args.rate)
+                                params_file=args.config, rate=args.rate, bag=bag)
     print(format_summary(summary))
     print(f"node exits      {summary['node_exits']}")
+    if bag is not None:
+        print(f"bag             {bag}")
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    return 0
+
+
+def cmd_bag(args: argparse.Namespace) -> int:
+    bag = _ros().bag
+    try:
+        if args.bag_command == "info":
+            info = bag.bag_info(args.path)
+            print(f"bag       {info['path']}\nduration  {info['duration_s']:.3f} s\nmessages  {info['messages']}")
+            for topic, e in info["topics"].items():
+                print(f"  {topic:<28} {e['type']:<36} {e['count']:>7}  {e['rate_hz']:8.2f} Hz")
+        elif args.bag_command == "export":
+            for path in bag.export_csv(args.path, args.output, args.topics):
+                print(path)
+        elif args.bag_command == "replan":
+            from .config import load_config
+
+            result = bag.replan(args.path, load_config(args.params), args.planner, args.v_des)
+            summary = result["summary"]
+            print("  t (s)   w rec / new    v̇_Y rec / new (m/s²)   δ* rec / new (rad)   MPC status rec / new")
+            for r in result["rows"]:
+                print(f"{r['t']:7.2f}   {r['recorded_weight']:5.2f} / {r['weight']:5.2f}   {r['recorded_ay']:8.3f} / {r['ay']:8.3f}"
+                      f"      {r['recorded_delta']:6.3f} / {r['delta']:6.3f}     {r['recorded_mpc_status'] or '-'} / {r['mpc_status'] or '-'}")
+            print(json.dumps(summary, indent=2))
+            if args.plot:
+                print(f"figure {bag.plot_replan(result['rows'], args.plot)}")
+        elif args.bag_command == "record":
+            return _record(bag, args)
+        elif args.bag_command == "play":
+            from moose_ros.runtime import DdsNode
+
+            node = DdsNode("moose_bag_play")
+            sent = bag.play(args.path, node, rate=args.rate, topics=args.topics, loop=args.loop, start=args.start,
+                            clock=args.clock)
+            print(f"played {sent} messages")
+    except bag.BagError as exc:
+        raise ParamError(str(exc)) from None
+    return 0
+
+
+def _record(bag: Any, args: argparse.Namespace) -> int:
+    import signal
+    import threading
+    import time
+
+    from moose_ros.runtime import DdsNode
+
+    node = DdsNode("moose_bag_record")
+    path = Path(args.output) if args.output else run_folder("record", "graph") / "bag"
+    recorder = bag.Recorder(node, path, None if args.all else args.topics)
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    print(f"recording into {path} (Ctrl-C to stop)", flush=True)
+    start = time.monotonic()
+    try:
+        while not stop.is_set() and (args.duration is None or time.monotonic() - start < args.duration):
+            node.spin_once(0.05)
+    finally:
+        recorder.close()
+    print(f"recorded {dict(recorder.writer.counts)}")
     return 0
 
 
@@ -153,6 +236,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_scenario_arguments(simulate)
     simulate.add_argument("--json", help="write the summary as JSON to this path")
     simulate.add_argument("--plot", help="write the paper-style figure (PNG) to this path")
+    simulate.add_argument("--bag", help="record the run into this bag directory (default: a new folder under runs/)")
+    simulate.add_argument("--no-bag", action="store_true", help="do not record a bag")
     simulate.set_defaults(handler=cmd_simulate)
     node = sub.add_parser("node", help="run one node of the graph (Cyclone DDS, or rclpy when installed)")
     node.add_argument("name", help="observer, obstacle_detector, mpc_planner, msf_planner, weight_fbl, "
@@ -165,7 +250,37 @@ def build_parser() -> argparse.ArgumentParser:
     add_scenario_arguments(launch)
     launch.add_argument("--rate", type=_positive_float, default=1.0, help="simulated seconds per wall-clock second")
     launch.add_argument("--json", help="write the summary as JSON to this path")
+    launch.add_argument("--bag", help="record every topic into this bag directory (default: a new folder under runs/)")
+    launch.add_argument("--no-bag", action="store_true", help="do not record a bag")
     launch.set_defaults(handler=cmd_launch)
+    bag = sub.add_parser("bag", help="record, play, inspect, export and re-plan ROS 2 bags (MCAP)")
+    bag_sub = bag.add_subparsers(dest="bag_command", required=True)
+    record = bag_sub.add_parser("record", help="record topics of the running graph")
+    record.add_argument("-o", "--output", help="bag directory to create")
+    record.add_argument("--topics", nargs="+", help="topics to record")
+    record.add_argument("--all", action="store_true", help="record every topic of the graph (default)")
+    record.add_argument("--duration", type=_positive_float, help="stop after this many seconds")
+    play = bag_sub.add_parser("play", help="publish a bag into the graph with its original timing")
+    play.add_argument("path")
+    play.add_argument("--rate", type=_positive_float, default=1.0)
+    play.add_argument("--topics", nargs="+")
+    play.add_argument("--loop", action="store_true")
+    play.add_argument("--start", type=float, default=0.0, help="skip this many seconds of the bag")
+    play.add_argument("--clock", action="store_true", help="publish /clock from the bag's timestamps")
+    info = bag_sub.add_parser("info", help="topics, types, counts, rates, duration")
+    info.add_argument("path")
+    export = bag_sub.add_parser("export", help="export topics to CSV (one file per topic)")
+    export.add_argument("path")
+    export.add_argument("-o", "--output", required=True, help="output folder")
+    export.add_argument("--topics", nargs="+")
+    replan = bag_sub.add_parser("replan", help="run the planners open-loop on a bag's recorded state and threats")
+    replan.add_argument("path")
+    replan.add_argument("--planner", choices=["combined", "mpc", "msf"], default="combined")
+    replan.add_argument("--params", help="ROS 2 parameter file with the parameters to judge")
+    replan.add_argument("--v-des", type=_positive_float, help="desired speed (default: speed at the first estimate)")
+    replan.add_argument("--plot", help="write recorded vs re-computed references (PNG)")
+    for parser_ in (record, play, info, export, replan):
+        parser_.set_defaults(handler=cmd_bag)
     return parser
 
 

@@ -65,6 +65,12 @@ class SimulationResult:
     trace: dict[str, np.ndarray]
     planning: list[PlanningRecord]
     first_threat: Optional[Threat]
+    samples: list = dataclasses.field(default_factory=list)
+    """Every sensor sample delivered to the observer, in order (for bags and replay)."""
+    estimates: list = dataclasses.field(default_factory=list)
+    """The observer's estimate at each motion tick."""
+    threats: list = dataclasses.field(default_factory=list)
+    """(t, threat or None) at each motion tick."""
 
 
 @dataclasses.dataclass
@@ -121,19 +127,25 @@ class ClosedLoop:
         u = np.zeros(3)
         threat: Optional[Threat] = None
         next_plan = 0
+        samples: list = []
+        estimates: list = []
+        threats: list = []
         for k in range(n_motion + 1):
             t = k * dt_motion
             state = self.plant.state
             specific_force = self.plant.imu_specific_force(state, u)
             for sample in self.sensors.sample(t, state, specific_force):
+                samples.append(sample)
                 self.observer.update(sample)
                 if isinstance(sample, EpsSample):
                     delta_meas = sample.delta
             estimate = self.observer.estimate()
+            estimates.append(estimate)
             appeared = appeared or state[0] >= self.scenario.x_appear
             visible = [self.scenario.danger_zone] if appeared else []
             previous = threat
             threat = self.detector.update(t, estimate, visible)
+            threats.append((t, threat))
             if threat is not None and first_threat is None:
                 first_threat = threat
             new_obstacle = threat is not None and (previous is None or previous.obstacle != threat.obstacle)
@@ -159,7 +171,8 @@ class ClosedLoop:
             if k < n_motion:
                 self.plant.step(u, sim.plant_steps_per_motion)
         columns = {name: trace[:, i].copy() for i, name in enumerate(TRACE_FIELDS)}
-        return SimulationResult(self.scenario, self.mode, self.seed, columns, planning, first_threat)
+        return SimulationResult(self.scenario, self.mode, self.seed, columns, planning, first_threat,
+                                samples, estimates, threats)
 
     def _plan(
         self, t: float, estimate: StateEstimate, threat: Optional[Threat], guess: Optional[np.ndarray]

@@ -5,6 +5,7 @@ Each node runs as ``python -m moose_ros.nodes NAME``; their output is streamed w
 plans, blends, threats, diagnostics) and builds the same summary as ``moose simulate``.
 The run ends when the simulator finishes (or, without a simulator, after ``duration``);
 Ctrl-C / SIGTERM stop every child (SIGTERM, then SIGKILL after a grace period).
+With ``bag`` set, every topic of the graph is recorded into that bag directory.
 A node that dies is reported, and the rest of the graph keeps running.
 """
 from __future__ import annotations
@@ -26,6 +27,7 @@ from moose.signals import Blend, Reference
 from moose.simulation import PlanningRecord, SimulationResult
 
 from . import convert as cv
+from .bag import Recorder
 from .runtime import QOS_DEFAULT, QOS_SENSOR, DdsNode
 
 GRAPHS = {
@@ -98,6 +100,7 @@ def launch(
     duration: Optional[float] = None,
     kill_after: Optional[tuple[str, float]] = None,
     out=sys.stdout,
+    bag: Optional[Any] = None,
 ) -> dict[str, Any]:
     """Run the graph once and return the summary (plus ``node_exits`` and ``diagnostics``)."""
     nodes = [n for n in GRAPHS[graph] if not (planner == "mpc" and n == "msf_planner") and not (planner == "msf" and n == "mpc_planner")]
@@ -129,6 +132,7 @@ def launch(
     monitor = Monitor(scenario)
     node = DdsNode("moose_monitor", overrides={"use_sim_time": False})
     monitor.attach(node)
+    recorder = Recorder(node, bag) if bag is not None else None
     exits: dict[str, int] = {}
     limit = time.monotonic() + (duration if duration is not None else (scenario.lead_time + scenario.duration) / rate + 60.0)
     started = time.monotonic()
@@ -166,6 +170,8 @@ def launch(
                 proc.wait()
             exits.setdefault(name, proc.returncode)
         node.shutdown()
+        if recorder is not None:
+            recorder.close()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     summary = summarize(monitor.result(planner, seed))
