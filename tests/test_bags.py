@@ -1,0 +1,173 @@
+"""Bags: round trip through DDS, crash safety, recovery errors, replay into the observer, re-planning."""
+from __future__ import annotations
+
+import dataclasses
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rosbags.rosbag2 import Reader
+
+from moose.config import load_config
+from moose_ros import convert as cv
+from moose_ros.bag import BagError, Recorder, bag_info, export_csv, play, read_bag, replan
+from moose_ros.interfaces import from_rosbags
+from moose_ros.runtime import QOS_DEFAULT, DdsNode
+
+ROOT = Path(__file__).resolve().parents[1]
+EXTREME = ROOT / "bags" / "paper_v7_tau1.4_combined"
+RELAXED = ROOT / "bags" / "paper_v5_tau3_combined"
+
+PUBLISHER = textwrap.dedent("""
+    import sys, time
+    import numpy as np
+    from moose_ros.runtime import create_node, QOS_DEFAULT
+    from moose_ros import convert as cv
+    node = create_node("bag_source")
+    odom = node.publisher("nav_msgs/msg/Odometry", "/vehicle/odom", QOS_DEFAULT)
+    state = node.publisher("moose_msgs/msg/StateEstimate", "/perception/state", QOS_DEFAULT)
+    time.sleep(1.0)
+    from moose.signals import StateEstimate
+    for k in range(int(sys.argv[1])):
+        odom(cv.odometry_to_msg(node, 0.02 * k, np.array([0.1 * k, 0.0, 0.0, 5.0, 0.0, 0.0])))
+        if k % 2 == 0:
+            state(cv.estimate_to_msg(node, StateEstimate(0.02 * k, 0.1 * k, 0.0, 0.0, 5.0, 0.0, 0.0, 0.0)))
+        time.sleep(0.02)
+    time.sleep(0.5)
+""")
+
+
+def test_record_round_trip_read_back_independently(tmp_path: Path) -> None:
+    node = DdsNode("bag_test_recorder")
+    recorder = Recorder(node, tmp_path / "bag", ["/vehicle/odom", "/perception/state"])
+    proc = subprocess.Popen([sys.executable, "-c", PUBLISHER, "100"])
+    try:
+        deadline = time.monotonic() + 30.0
+        while proc.poll() is None and time.monotonic() < deadline:
+            node.spin_once(0.05)
+        node.spin_once(0.2)
+    finally:
+        proc.kill()
+        proc.wait()
+        recorder.close()
+    with Reader(tmp_path / "bag") as reader:  # rosbags' own reader, not ours
+        counts = {c.topic: c.msgcount for c in reader.connections}
+        stamps = [t for c, t, _ in reader.messages() if c.topic == "/vehicle/odom"]
+        assert {c.msgtype for c in reader.connections} == {"nav_msgs/msg/Odometry", "moose_msgs/msg/StateEstimate"}
+    assert counts["/vehicle/odom"] == 100 and counts["/perception/state"] == 50
+    rate = (len(stamps) - 1) / ((stamps[-1] - stamps[0]) * 1e-9)
+    assert 30.0 < rate < 55.0  # published at 50 Hz (sleep-paced), stamped on reception
+    assert (tmp_path / "bag" / "metadata.yaml").is_file()
+
+
+RECORDER = [sys.executable, "-m", "moose.cli", "bag", "record", "--topics", "/vehicle/odom", "-o"]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+def test_killed_recorder_leaves_a_readable_bag(tmp_path: Path, sig: int) -> None:
+    out = tmp_path / "bag"
+    recorder = subprocess.Popen(RECORDER + [str(out)], stdout=subprocess.PIPE, text=True)
+    publisher = subprocess.Popen([sys.executable, "-c", PUBLISHER, "200"])
+    try:
+        time.sleep(6.0)  # recorder up, about 3 s of messages, several flushes
+        recorder.send_signal(sig)
+        recorder.wait(timeout=20)
+    finally:
+        publisher.kill()
+        publisher.wait()
+        recorder.kill()
+        recorder.wait()
+    messages = list(read_bag(out))
+    assert len(messages) > 50
+    xs = [from_rosbags(m.msg, m.type_name).pose.pose.position.x for m in messages]
+    assert xs == sorted(xs) and np.allclose(np.diff(xs), 0.1)  # a gap-free prefix of what was sent
+    assert (out / "metadata.yaml").is_file() == (sig == signal.SIGTERM)
+
+
+def test_corrupt_and_truncated_bags_give_clear_errors(tmp_path: Path) -> None:
+    garbage = tmp_path / "garbage"
+    garbage.mkdir()
+    (garbage / "garbage.mcap").write_bytes(b"not an mcap file at all" * 10)
+    with pytest.raises(BagError, match="not a readable MCAP file|no complete chunk"):
+        list(read_bag(garbage))
+    with pytest.raises(BagError, match="does not exist"):
+        list(read_bag(tmp_path / "missing"))
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(BagError, match="neither metadata.yaml nor an .mcap"):
+        list(read_bag(empty))
+    truncated = tmp_path / "truncated"
+    shutil.copytree(EXTREME, truncated)
+    mcap = next(truncated.glob("*.mcap"))
+    mcap.write_bytes(mcap.read_bytes()[: int(mcap.stat().st_size * 0.9)])  # past the first (1 MiB) chunk
+    (truncated / "metadata.yaml").unlink()
+    recovered = list(read_bag(truncated))
+    assert 0 < len(recovered) < bag_info(EXTREME)["messages"]
+
+
+def test_info_and_export(tmp_path: Path) -> None:
+    info = bag_info(RELAXED)
+    assert info["duration_s"] == pytest.approx(9.0)
+    assert info["topics"]["/perception/state"]["rate_hz"] == pytest.approx(100.0)
+    assert info["topics"]["/planning/mpc"]["rate_hz"] == pytest.approx(5.0, rel=0.05)
+    files = export_csv(RELAXED, tmp_path, ["/perception/state"])
+    lines = files[0].read_text().splitlines()
+    assert lines[0].startswith("timestamp_ns,header.stamp.sec") and len(lines) == 902
+
+
+def test_replay_drives_the_observer_to_the_recorded_estimates(tmp_path: Path) -> None:
+    env = dict(os.environ)
+    observer = subprocess.Popen([sys.executable, "-m", "moose_ros.nodes", "observer", "--param", "use_sim_time=true",
+                                 "--param", "scenario=paper_v5_tau3"], env=env, stdout=subprocess.DEVNULL)
+    node = DdsNode("replay_test")
+    live: dict[int, tuple[float, float]] = {}
+    node.subscription("moose_msgs/msg/StateEstimate", "/perception/state",
+                      lambda m: live.__setitem__(round(cv.time_of(m) * 100), (m.vx, m.vy)), QOS_DEFAULT)
+    stop = threading.Event()
+    try:
+        time.sleep(3.0)  # observer up
+        sensors = ["/vehicle/imu", "/vehicle/gps", "/vehicle/wheel_speeds", "/vehicle/steering"]
+        player = threading.Thread(target=play, args=(RELAXED, DdsNode("replay_player")),
+                                  kwargs={"rate": 2.0, "topics": sensors, "clock": True, "stop": stop})
+        player.start()
+        while player.is_alive():
+            node.spin_once(0.05)
+        node.spin_once(0.5)
+    finally:
+        stop.set()
+        observer.kill()
+        observer.wait()
+    recorded = {round(cv.time_of(from_rosbags(m.msg, m.type_name)) * 100): (m.msg.vx, m.msg.vy)
+                for m in read_bag(RELAXED, ["/perception/state"])}
+    common = sorted(set(live) & set(recorded))
+    assert len(common) > 0.8 * len(recorded)
+    err = np.array([np.subtract(live[k], recorded[k]) for k in common])
+    assert np.sqrt(np.mean(err[:, 0] ** 2)) < 0.05 and np.sqrt(np.mean(err[:, 1] ** 2)) < 0.05
+
+
+def test_replan_reproduces_the_recording_and_sees_a_parameter_change(tmp_path: Path) -> None:
+    config = load_config()
+    same = replan(EXTREME, config, v_des=7.0)["summary"]
+    assert same["steps"] == 46 and same["mpc_status_agreement"] == 1.0
+    assert same["rms_ay"] < 1e-6 and same["rms_weight"] < 1e-6
+    changed = dataclasses.replace(config, msf=dataclasses.replace(config.msf, margin=1.5))
+    other = replan(EXTREME, changed, v_des=7.0)["summary"]
+    assert other["rms_ay"] > 0.1
+    odom_only = tmp_path / "odom_only"
+    shutil.copytree(RELAXED, tmp_path / "relaxed")
+    from moose_ros.bag import BagWriter
+
+    writer = BagWriter(odom_only)
+    for m in read_bag(tmp_path / "relaxed", ["/vehicle/odom"]):
+        writer.write(m.topic, m.type_name, m.timestamp_ns, bytes(from_rosbags(m.msg, m.type_name).serialize()))
+    writer.close()
+    with pytest.raises(BagError, match="no planning instants"):
+        replan(odom_only, config)
