@@ -154,7 +154,7 @@ def launch(
             if "vehicle_simulator" in exits or (graph == "car" and monitor.finished):
                 break
             if monitor.finished:
-                limit = min(limit, time.monotonic() + 5.0)  # the simulator is closing down
+                limit = min(limit, time.monotonic() + 15.0)  # the simulator is closing down
         for _ in range(10):  # let the last messages arrive
             node.spin_once(0.02)
     finally:

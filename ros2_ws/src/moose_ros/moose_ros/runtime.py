@@ -113,6 +113,7 @@ class DdsNode(_NodeBase):
         self._readers: list[tuple[Any, Callable[[Any], None], type, Any]] = []
         self._readers_lock = threading.Lock()
         self._waitset: Any = None
+        self._take_thread: Optional[threading.Thread] = None
         self._stop = threading.Event()
         self._sim_now: Optional[float] = None
         if self.use_sim_time:
@@ -165,7 +166,8 @@ class DdsNode(_NodeBase):
         reader = DataReader(self.participant, self._topic(type_name, topic), qos=self._qos(qos))
         if self._waitset is None:
             self._waitset = WaitSet(self.participant)
-            threading.Thread(target=self._take_loop, name=f"{self.name}-dds", daemon=True).start()
+            self._take_thread = threading.Thread(target=self._take_loop, name=f"{self.name}-dds", daemon=True)
+            self._take_thread.start()
         condition = ReadCondition(reader, SampleState.Any | ViewState.Any | InstanceState.Any)
         with self._readers_lock:
             self._readers.append((reader, callback, message_class(type_name), condition))
@@ -232,7 +234,11 @@ class DdsNode(_NodeBase):
             self.spin_once(min(wait, 0.05))
 
     def shutdown(self) -> None:
+        """Stop spinning; the DDS intake thread leaves its wait within 50 ms and is joined."""
         self._stop.set()
+        thread = self._take_thread
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout=2.0)
 
 
 class RclpyNode(_NodeBase):

@@ -1,0 +1,177 @@
+"""CAN layer: DBC round trip, bus load, CRC, malformed frames, command guard limits and timeout, bridge ↔ ECU."""
+from __future__ import annotations
+
+import math
+
+import can
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from moose.canbus.bridge import BridgeCore
+from moose.canbus.bus import open_bus
+from moose.canbus.busload import worst_case_bus_load, worst_case_frame_bits
+from moose.canbus.codec import Codec, crc8_j1850, load_database
+from moose.canbus.ecu import VehicleEcu
+from moose.canbus.safety import Command, CommandGuard, GuardParams
+from moose.signals import EpsSample, GpsSample, ImuSample, WheelSpeedSample
+
+DB = load_database()
+GUARD = GuardParams()
+
+
+def test_dbc_round_trips_every_signal_at_its_limits() -> None:
+    codec = Codec(DB)
+    for message in DB.messages:
+        for bound in ("minimum", "maximum"):
+            values = {s.name: getattr(s, bound) for s in message.signals if s.name not in ("Counter", "Checksum")}
+            frame = codec.encode(message.name, values)
+            name, decoded = Codec(DB).decode(frame)
+            assert name == message.name
+            for key, value in values.items():
+                scale = next(s.scale for s in message.signals if s.name == key)
+                assert decoded[key] == pytest.approx(value, abs=scale)
+
+
+def test_bus_load_below_half_at_500_kbps() -> None:
+    assert DB.dbc.attributes["Baudrate"].value == 500_000
+    assert worst_case_frame_bits(8) == 135 and worst_case_frame_bits(0) == 55
+    load = worst_case_bus_load(DB, 500_000)
+    assert 0.05 < load < 0.5
+
+
+def test_crc_is_sae_j1850() -> None:
+    assert crc8_j1850(b"123456789") == 0x4B
+    assert crc8_j1850(b"\x00\x00\x00\x00") == 0x59
+
+
+def test_bad_counter_checksum_length_and_id_are_dropped_and_counted() -> None:
+    tx, rx = Codec(DB), Codec(DB)
+    first = tx.encode("CMD_TORQUE", {"TorqueRL": 10.0, "TorqueRR": 10.0})
+    assert rx.decode(first) is not None
+    corrupted = bytearray(tx.encode("CMD_TORQUE", {"TorqueRL": 10.0, "TorqueRR": 10.0}).data)
+    corrupted[0] ^= 0x01
+    assert rx.decode(can.Message(arbitration_id=0x101, data=bytes(corrupted), is_extended_id=False)) is None
+    tx.encode("CMD_TORQUE", {"TorqueRL": 0.0, "TorqueRR": 0.0})  # a lost frame: the counter jumps
+    assert rx.decode(tx.encode("CMD_TORQUE", {"TorqueRL": 0.0, "TorqueRR": 0.0})) is None
+    assert rx.decode(can.Message(arbitration_id=0x101, data=b"\x00" * 5, is_extended_id=False)) is None
+    assert rx.decode(can.Message(arbitration_id=0x7FF, data=b"\x00" * 8, is_extended_id=False)) is None
+    s = rx.stats
+    assert (s.bad_checksum, s.bad_counter, s.bad_length, s.unknown_id) == (1, 1, 1, 1)
+
+
+def within_limits(out: Command, previous: Command, dt: float) -> bool:
+    tol = 1e-9
+    return (abs(out.steering_angle) <= GUARD.delta_max + tol and abs(out.torque_rl) <= GUARD.torque_max + tol
+            and abs(out.torque_rr) <= GUARD.torque_max + tol and abs(out.steering_rate) <= GUARD.eps_rate_max + tol
+            and abs(out.steering_angle - previous.steering_angle) <= GUARD.steer_rate_limit * dt + tol
+            and abs(out.torque_rl - previous.torque_rl) <= GUARD.torque_rate_limit * dt + tol
+            and abs(out.torque_rr - previous.torque_rr) <= GUARD.torque_rate_limit * dt + tol)
+
+
+values = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.floats(-1e6, 1e6))
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(values, values, values, values, st.booleans()), min_size=1, max_size=60))
+def test_guard_never_emits_out_of_limit_commands(stream: list) -> None:
+    guard = CommandGuard(GUARD)
+    previous = guard.output(0.0)
+    for k, (angle, rate, t_rl, t_rr, send) in enumerate(stream, start=1):
+        t = 0.01 * k
+        if send:
+            guard.receive(Command(angle, rate, t_rl, t_rr), t)
+        out = guard.output(t)
+        assert all(math.isfinite(v) for v in (out.steering_angle, out.steering_rate, out.torque_rl, out.torque_rr))
+        assert within_limits(out, previous, 0.01)
+        previous = out
+
+
+frames = st.builds(
+    lambda i, data, ext: can.Message(arbitration_id=i, data=data, is_extended_id=ext),
+    st.one_of(st.sampled_from([m.frame_id for m in DB.messages]), st.integers(0, 0x7FF)),
+    st.binary(min_size=0, max_size=8),
+    st.booleans(),
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(frames, max_size=40))
+def test_random_and_malformed_frames_never_crash_the_bridge(stream: list) -> None:
+    bridge = BridgeCore(GUARD)
+    for k, frame in enumerate(stream):
+        sample = bridge.on_frame(frame, 0.01 * k)
+        assert sample is None or isinstance(sample, (ImuSample, WheelSpeedSample, EpsSample, GpsSample))
+        for out in bridge.tick(0.01 * k):
+            decoded = Codec(DB).decode(out)
+            assert decoded is not None
+            name, v = decoded
+            if name == "CMD_STEER":
+                assert abs(v["SteerAngleCmd"]) <= GUARD.delta_max + 1e-4
+            if name == "CMD_TORQUE":
+                assert abs(v["TorqueRL"]) <= GUARD.torque_max + 0.01 and abs(v["TorqueRR"]) <= GUARD.torque_max + 0.01
+
+
+def test_timeout_sends_the_safe_state_within_one_command_cycle() -> None:
+    bridge = BridgeCore(GUARD)
+    rx = Codec(DB)
+    deadline = 0.2 + GUARD.timeout
+    torques, rates, angles = {}, {}, {}
+    for k in range(60):  # fresh commands up to 0.2 s, then silence
+        t = round(0.01 * k, 9)
+        if t <= 0.2:
+            bridge.on_command(Command(0.1, 0.5, 150.0, 150.0), t)
+        for frame in bridge.tick(t):
+            decoded = rx.decode(frame)
+            assert decoded is not None
+            if decoded[0] == "CMD_TORQUE":
+                torques[t] = decoded[1]["TorqueRL"]
+            if decoded[0] == "CMD_STEER":
+                rates[t], angles[t] = decoded[1]["SteerRateCmd"], decoded[1]["SteerAngleCmd"]
+    first_safe = min(t for t in rates if t > deadline)
+    assert first_safe <= deadline + 0.01 + 1e-9  # within one 10 ms command cycle of the deadline
+    assert torques[first_safe] < torques[0.2] and rates[first_safe] == 0.0  # ramping down, EPS stopped
+    ramp_end = deadline + 150.0 / GUARD.torque_rate_limit + 0.02
+    assert all(torques[t] == 0.0 for t in torques if t > ramp_end)
+    assert all(angles[t] == pytest.approx(angles[0.2], abs=1e-4) for t in angles if t > deadline)  # held
+    assert bridge.guard.timed_out
+
+
+def test_bridge_and_ecu_over_a_virtual_bus() -> None:
+    car_side, bridge_side = open_bus("virtual", "moose-test-vbus"), open_bus("virtual", "moose-test-vbus")
+    try:
+        bridge, ecu = BridgeCore(GUARD), VehicleEcu()
+        samples = []
+        for k in range(40):
+            t = 0.01 * k
+            bridge.on_command(Command(0.05, 0.2, 80.0, 80.0), t)
+            for frame in bridge.tick(t):
+                bridge_side.send(frame)
+            while (frame := car_side.recv(timeout=0.0)) is not None:
+                ecu.on_frame(frame, t)
+            sensor = [ImuSample(t, 0.5, 0.2, 0.01), WheelSpeedSample(t, 20.0, 20.5), EpsSample(t, 0.04)]
+            if k == 20:
+                sensor.append(GpsSample(t, t - 0.2, 12.345, -3.21, 6.9, 0.1))
+            for sample in sensor:
+                for frame in ecu.encode(sample, t):
+                    car_side.send(frame)
+            while (frame := bridge_side.recv(timeout=0.0)) is not None:
+                decoded = bridge.on_frame(frame, t)
+                if decoded is not None:
+                    samples.append(decoded)
+        u = ecu.plant_input(0.39)
+        assert u[0] == pytest.approx(0.2, abs=1e-3) and u[1] == pytest.approx(80.0, abs=0.01)  # torque ramped up
+        gps = [s for s in samples if isinstance(s, GpsSample)]
+        assert len(gps) == 1 and gps[0].x == pytest.approx(12.345) and gps[0].t - gps[0].t_measured == pytest.approx(0.2)
+        assert sum(isinstance(s, ImuSample) for s in samples) == 40
+        assert bridge.codec.stats.dropped == 0 and ecu.codec.stats.dropped == 0
+        assert np.allclose(ecu.plant_input(1.0), 0.0)  # the ECU's own timeout
+    finally:
+        car_side.shutdown()
+        bridge_side.shutdown()
+
+
+def test_unknown_interface_is_refused() -> None:
+    with pytest.raises(ValueError, match="interface = 'serial'"):
+        open_bus("serial", "x")
