@@ -27,6 +27,42 @@ from moose_ros.runtime import QOS_DEFAULT, QOS_SENSOR, DdsNode
 
 SIM_SECONDS = 30.0
 
+PINGER = """
+import sys, time
+from moose_ros.runtime import create_node, QOS_SENSOR
+node = create_node("transport_pinger")
+pub = node.publisher("sensor_msgs/msg/Imu", "/bench/ping", QOS_SENSOR)
+time.sleep(1.0)
+for k in range(int(sys.argv[1])):
+    msg = node.make("sensor_msgs/msg/Imu")
+    now = time.monotonic()  # CLOCK_MONOTONIC: one clock for every process of this machine
+    msg.header.stamp.sec, msg.header.stamp.nanosec = int(now), int((now % 1) * 1e9)
+    pub(msg)
+    time.sleep(0.01)
+time.sleep(0.3)
+"""
+
+
+def transport(count: int = 1000) -> np.ndarray:
+    """One-way latency (s) of an IMU message between two processes, nothing computed on either side."""
+    import subprocess
+    import sys
+
+    node = DdsNode("transport_bench")
+    latencies: list[float] = []
+    node.subscription("sensor_msgs/msg/Imu", "/bench/ping",
+                      lambda m: latencies.append(time.monotonic() - cv.time_of(m)), QOS_SENSOR)
+    proc = subprocess.Popen([sys.executable, "-c", PINGER, str(count)])
+    try:
+        while proc.poll() is None:
+            node.spin_once(0.01)
+        node.spin_once(0.2)
+    finally:
+        proc.kill()
+        proc.wait()
+        node.shutdown()
+    return np.array(latencies)
+
 
 def main() -> None:
     os.environ.setdefault("ROS_DOMAIN_ID", str(1 + os.getpid() % 200))
@@ -74,6 +110,9 @@ def main() -> None:
               f"{len(arrivals[kind]):>10} {100 * max(0, expected - len(arrivals[kind])) / expected:7.1f}%")
     print(f"{'IMU samples':>18} {'':>8} {'':>8} {len(arrivals['imu']):>10} "
           f"{100 * max(0, expected - len(arrivals['imu'])) / expected:7.1f}%")
+    lat = transport() * 1e3
+    print(f"{'transport only':>18} {np.percentile(lat, 50):8.2f} {np.percentile(lat, 99):8.2f} {len(lat):>10} "
+          f"{100 * max(0, 1000 - len(lat)) / 1000:7.1f}%   (one hop between two processes, 100 Hz, no compute)")
 
 
 if __name__ == "__main__":

@@ -171,3 +171,25 @@ def test_replan_reproduces_the_recording_and_sees_a_parameter_change(tmp_path: P
     writer.close()
     with pytest.raises(BagError, match="no planning instants"):
         replan(odom_only, config)
+
+
+def test_existing_or_unwritable_output_is_a_clear_error(tmp_path: Path) -> None:
+    from moose_ros.bag import BagWriter
+
+    (tmp_path / "taken").mkdir()
+    with pytest.raises(BagError, match="exists already"):
+        BagWriter(tmp_path / "taken")
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o500)
+    try:
+        if os.access(locked, os.W_OK):  # root ignores permissions: use a path under a file instead
+            blocker = tmp_path / "file"
+            blocker.write_text("x")
+            with pytest.raises(BagError, match="cannot be written"):
+                BagWriter(blocker / "bag")
+        else:
+            with pytest.raises(BagError, match="not writable"):
+                BagWriter(locked / "bag")
+    finally:
+        locked.chmod(0o700)

@@ -54,7 +54,10 @@ class BagWriter:
         if self.path.exists():
             raise BagError(f"bag {str(self.path)!r} exists already: choose another output directory")
         parent = self.path.parent
-        parent.mkdir(parents=True, exist_ok=True)
+        try:
+            parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise BagError(f"bag {str(self.path)!r} cannot be written: {exc.strerror or exc}") from None
         if not os.access(parent, os.W_OK):
             raise BagError(f"bag {str(self.path)!r} cannot be written: {str(parent)!r} is not writable")
         self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)

@@ -135,15 +135,15 @@ def launch(
     recorder = Recorder(node, bag) if bag is not None else None
     exits: dict[str, int] = {}
     limit = time.monotonic() + (duration if duration is not None else (scenario.lead_time + scenario.duration) / rate + 60.0)
-    started = time.monotonic()
     stop = threading.Event()
     previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)} \
         if threading.current_thread() is threading.main_thread() else {}
     try:
         while not stop.is_set() and time.monotonic() < limit:
             node.spin_once(0.05)
-            if kill_after and kill_after[0] in procs and time.monotonic() - started > kill_after[1] and kill_after[0] not in exits:
-                procs[kill_after[0]].kill()
+            sim_time = monitor.odom[-1][0] if monitor.odom else -1.0
+            if kill_after and kill_after[0] in procs and sim_time >= kill_after[1] and kill_after[0] not in exits:
+                procs[kill_after[0]].kill()  # fault injection for tests: SIGKILL at a simulated time
             for name, proc in procs.items():
                 code = proc.poll()
                 if code is not None and name not in exits:
