@@ -102,7 +102,7 @@ class Recorder:
     """Records topics of a running graph through a DDS node of the runtime."""
 
     def __init__(self, node: Any, path: str | Path, topics: Optional[Sequence[str]] = None) -> None:
-        from .runtime import QOS_DEFAULT, QOS_LATCHED, QOS_SENSOR
+        from .runtime import QOS_DEFAULT, QOS_LATCHED, QOS_LATCHED_READER, QOS_SENSOR
 
         chosen = list(topics) if topics else list(TOPIC_TYPES)
         unknown = [t for t in chosen if t not in TOPIC_TYPES]
@@ -110,9 +110,15 @@ class Recorder:
             raise BagError(f"--topics {unknown[0]!r} is not a topic of the graph; topics: {', '.join(TOPIC_TYPES)}")
         self.writer = BagWriter(path)
         sensor = {"/vehicle/odom", "/vehicle/imu", "/vehicle/wheel_speeds", "/vehicle/steering"}
-        latched = {"/perception/obstacles", "/diagnostics"}
         for topic in chosen:
-            qos = QOS_SENSOR if topic in sensor else QOS_LATCHED if topic in latched else QOS_DEFAULT
+            if topic in sensor:
+                qos = QOS_SENSOR
+            elif topic == "/diagnostics":
+                qos = QOS_LATCHED_READER
+            elif topic == "/perception/obstacles":
+                qos = QOS_LATCHED
+            else:
+                qos = QOS_DEFAULT
             node.subscription(TOPIC_TYPES[topic], topic, self._callback(topic), qos)
 
     def _callback(self, topic: str):

@@ -31,7 +31,7 @@ from moose.vehicle import VehiclePlant, initial_state
 from moose.weight import WeightFunction
 
 from . import convert as cv
-from .runtime import QOS_CLOCK, QOS_DEFAULT, QOS_LATCHED, QOS_SENSOR, create_node
+from .runtime import QOS_CLOCK, QOS_DEFAULT, QOS_LATCHED, QOS_LATCHED_READER, QOS_SENSOR, create_node
 
 OK, WARN, ERROR = 0, 1, 2
 
@@ -92,7 +92,7 @@ class VehicleSimulator(GraphNode):
         self.waiting = set(rt.param("wait_for", []) or [])
         self.startup_deadline = float(rt.param("startup_timeout", 60.0))
         self.wall_start: Optional[float] = None
-        rt.subscription("diagnostic_msgs/msg/DiagnosticArray", "/diagnostics", self.on_diagnostics, QOS_LATCHED)
+        rt.subscription("diagnostic_msgs/msg/DiagnosticArray", "/diagnostics", self.on_diagnostics, QOS_LATCHED_READER)
         # wall-clock pacing: one motion step every dt / rate seconds; simulated time is published on /clock
         rt.timer(self.dt / float(rt.param("rate", 1.0)), self.step)
 

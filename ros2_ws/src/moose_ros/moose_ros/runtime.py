@@ -44,6 +44,9 @@ QOS_SENSOR = Qos(reliable=False, depth=5)
 """rclpy's qos_profile_sensor_data: best effort, keep last 5."""
 QOS_LATCHED = Qos(reliable=True, depth=1, transient_local=True)
 """Reliable, transient local, keep last 1 (late joiners get the last sample)."""
+QOS_LATCHED_READER = Qos(reliable=True, depth=100, transient_local=True)
+"""Reader side of latched topics with many writers (``/diagnostics``): keyless topics share one
+history, so a depth of 1 would keep only one writer's late-joiner sample."""
 QOS_CLOCK = Qos(reliable=True, depth=1)
 
 
