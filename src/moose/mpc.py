@@ -234,6 +234,7 @@ class MpcPlanner:
         status = "failed"
         iterations = 0
         solution = guess
+        cost = math.inf
         if np.all(np.isfinite(p)):
             try:
                 sol = self._solver(x0=guess, p=p, lbx=-1.0, ubx=1.0)
@@ -242,6 +243,7 @@ class MpcPlanner:
                 candidate = np.asarray(sol["x"], dtype=float).ravel()
                 if np.all(np.isfinite(candidate)):
                     solution = np.clip(candidate, -1.0, 1.0)
+                    cost = float(sol["f"])
                     status = "converged" if stats.get("success", False) else (
                         "capped" if stats.get("return_status") == "Maximum_Iterations_Exceeded" or iterations >= prm.caps.max_iter
                         else "failed")
@@ -250,14 +252,12 @@ class MpcPlanner:
         elapsed = time.perf_counter() - start
         if status != "failed" and elapsed > prm.time_budget_s:
             status = "over_budget"
-        states, cost = self._rollout(solution, np.nan_to_num(p))
-        states = np.asarray(states, dtype=float)
-        states[:, 1] = y_path + side * states[:, 1]
-        states[:, 3] = side * states[:, 3]
         accel = solution.reshape(n, 2) * scale
+        est = inp.estimate
+        start_state = np.nan_to_num(np.array([est.x, est.y, est.vX, est.vY]))
         return PlanResult(
             accel=accel, status=status, iterations=iterations, solve_time_s=elapsed,
-            cost=float(cost) if status != "failed" else math.inf, predicted=states,
+            cost=cost if status != "failed" else math.inf, predicted=kinematic_rollout(start_state, accel, prm.t_s),
         )
 
 

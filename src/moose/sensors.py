@@ -65,12 +65,14 @@ class Sensors:
         p, n = self.params, self.rng.normal
         out: list[Sample] = []
         if self._due("imu", t, p.imu_rate_hz):
-            out.append(ImuSample(t, specific_force[0] + n(0.0, p.accel_std), specific_force[1] + n(0.0, p.accel_std),
-                                 state[GAMMA] + n(0.0, p.gyro_std)))
+            e = n(0.0, 1.0, 3)
+            out.append(ImuSample(t, specific_force[0] + p.accel_std * e[0], specific_force[1] + p.accel_std * e[1],
+                                 float(state[GAMMA] + p.gyro_std * e[2])))
         if self._due("wheel", t, p.wheel_rate_hz):
-            out.append(WheelSpeedSample(t, state[OMEGA_RL] + n(0.0, p.wheel_std), state[OMEGA_RR] + n(0.0, p.wheel_std)))
+            e = n(0.0, p.wheel_std, 2)
+            out.append(WheelSpeedSample(t, float(state[OMEGA_RL] + e[0]), float(state[OMEGA_RR] + e[1])))
         if self._due("eps", t, p.eps_rate_hz):
-            out.append(EpsSample(t, state[DELTA] + n(0.0, p.eps_std)))
+            out.append(EpsSample(t, float(state[DELTA] + n(0.0, p.eps_std))))
         if self._due("gps", t, p.gps_rate_hz):
             c, s = np.cos(state[THETA]), np.sin(state[THETA])
             vX = state[VX] * c - state[VY] * s
