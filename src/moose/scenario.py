@@ -19,32 +19,13 @@ from typing import Any, Optional
 import yaml
 
 from .params import ParamError, build, check, non_negative, positive
-from .signals import Obstacle
+from .signals import Obstacle as Box
 
 SCENARIO_DIR = Path(__file__).resolve().parents[2] / "config" / "scenarios"
 """The scenario folder of a source checkout."""
 
 V_MAX_FIELD = 20.0
 """Highest speed a scenario may ask for (m/s): the campus field's limit is about 7 m/s."""
-
-
-@dataclasses.dataclass(frozen=True)
-class Box:
-    """Axis-aligned rectangle in the ``odom`` frame (m)."""
-
-    x_min: float
-    x_max: float
-    y_min: float
-    y_max: float
-
-    def __post_init__(self) -> None:
-        if not self.x_min < self.x_max:
-            raise ParamError(f"x_min = {self.x_min!r} is invalid: expected below x_max = {self.x_max!r}")
-        if not self.y_min < self.y_max:
-            raise ParamError(f"y_min = {self.y_min!r} is invalid: expected below y_max = {self.y_max!r}")
-
-    def contains(self, x: float, y: float) -> bool:
-        return self.x_min <= x <= self.x_max and self.y_min <= y <= self.y_max
 
 
 @dataclasses.dataclass(frozen=True)
@@ -110,10 +91,9 @@ class Scenario:
         return self.x_appear - self.v_init * self.lead_time
 
     @property
-    def danger_zone(self) -> Obstacle:
+    def danger_zone(self) -> Box:
         """The obstacle as the perception layer reports it."""
-        b = self.obstacle
-        return Obstacle(b.x_min, b.x_max, b.y_min, b.y_max)
+        return self.obstacle
 
 
 def scenario_from_mapping(data: Any, where: str = "scenario") -> Scenario:

@@ -12,6 +12,8 @@ from typing import Literal
 
 import numpy as np
 
+from .params import ParamError
+
 PlanStatus = Literal["converged", "capped", "failed", "over_budget", "ok", "idle"]
 """Outcome of one planning step.
 
@@ -60,7 +62,8 @@ class StateEstimate:
 
 @dataclasses.dataclass(frozen=True)
 class Obstacle:
-    """A static obstacle's danger zone: the axis-aligned box the CoG must avoid (m)."""
+    """An axis-aligned box in ``odom`` (m): an obstacle's danger zone, the box the CoG must avoid
+    (also the drivable field of a scenario)."""
 
     x_min: float
     x_max: float
@@ -69,9 +72,12 @@ class Obstacle:
 
     def __post_init__(self) -> None:
         if not self.x_min < self.x_max:
-            raise ValueError(f"obstacle.x_min = {self.x_min!r} must be below obstacle.x_max = {self.x_max!r}")
+            raise ParamError(f"x_min = {self.x_min!r} is invalid: expected below x_max = {self.x_max!r}")
         if not self.y_min < self.y_max:
-            raise ValueError(f"obstacle.y_min = {self.y_min!r} must be below obstacle.y_max = {self.y_max!r}")
+            raise ParamError(f"y_min = {self.y_min!r} is invalid: expected below y_max = {self.y_max!r}")
+
+    def contains(self, x: float, y: float) -> bool:
+        return self.x_min <= x <= self.x_max and self.y_min <= y <= self.y_max
 
     def clearance(self, x: float, y: float) -> float:
         """Signed distance of point (x, y) to the box: negative inside (m)."""
