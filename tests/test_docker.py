@@ -38,6 +38,7 @@ def test_compose_services_launch_existing_groups_and_executables() -> None:
     for name, service in services.items():
         assert service["command"][:4] == ["ros2", "launch", "moose_ros", "moose_graph.launch.py"]
         assert service["command"][4] == f"group:={name}"
+    assert services["bridge"]["profiles"] == ["car"] and "with_simulator:=false" in services["bridge"]["command"]
 
 
 def test_msg_package_lists_every_message_file() -> None:

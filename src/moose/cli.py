@@ -157,7 +157,9 @@ def cmd_launch(args: argparse.Namespace) -> int:
     params.update({k: v for k, v in (("duration", args.duration), ("mu", args.mu)) if v is not None})
     bag = None if args.no_bag else (Path(args.bag) if args.bag else run_folder(scenario.name, args.planner or "combined") / "bag")
     summary = ros.launch.launch(scenario, params, graph=args.graph, planner=args.planner or "combined", seed=args.seed,
-                                params_file=args.config, rate=args.rate, bag=bag)
+                                params_file=args.config, rate=args.rate, bag=bag,
+                                can_params={"can_interface": args.can_interface, "can_channel": args.can_channel,
+                                            "can_port": args.can_port})
     print(format_summary(summary))
     print(f"node exits      {summary['node_exits']}")
     if bag is not None:
@@ -246,7 +248,11 @@ def build_parser() -> argparse.ArgumentParser:
     node.add_argument("--param", action="append", default=[], help="parameter override key=value")
     node.set_defaults(handler=cmd_node)
     launch = sub.add_parser("launch", help="run the whole node graph as separate processes")
-    launch.add_argument("graph", nargs="?", default="full", choices=["full", "car"], help="full (with simulator) or car")
+    launch.add_argument("graph", nargs="?", default="full", choices=["full", "car", "can"],
+                        help="full (simulator on topics), car (CAN bridge, no simulator) or can (both over the DBC)")
+    launch.add_argument("--can-interface", default="udp_multicast", choices=["udp_multicast", "socketcan", "virtual"])
+    launch.add_argument("--can-channel", default="239.74.163.2", help="multicast group / socketcan device")
+    launch.add_argument("--can-port", type=int, default=43113, help="UDP port of the udp_multicast bus")
     add_scenario_arguments(launch)
     launch.add_argument("--rate", type=_positive_float, default=1.0, help="simulated seconds per wall-clock second")
     launch.add_argument("--json", help="write the summary as JSON to this path")

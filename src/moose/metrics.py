@@ -28,7 +28,7 @@ def summarize(result: SimulationResult) -> dict[str, Any]:
     )
     solves = [r.mpc for r in result.planning if r.mpc is not None]
     solve_ms = np.array([s.solve_time_s * 1e3 for s in solves])
-    threatened = [r.blend.weight_mpc for r in result.planning if r.threat is not None]
+    threatened = [r.blend.weight_mpc for r in result.planning if r.threat is not None and np.isfinite(r.blend.weight_mpc)]
     first = result.first_threat
     return {
         "scenario": scenario.name,

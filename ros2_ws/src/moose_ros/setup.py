@@ -6,7 +6,7 @@ from setuptools import setup
 PACKAGE = "moose_ros"
 NODES = [
     "observer", "obstacle_detector", "mpc_planner", "msf_planner",
-    "weight_fbl", "motion_controller", "vehicle_simulator",
+    "weight_fbl", "motion_controller", "vehicle_simulator", "can_bridge",
 ]
 
 setup(

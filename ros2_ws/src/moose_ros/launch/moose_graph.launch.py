@@ -2,7 +2,8 @@
 
 Groups mirror the vehicle's ECUs: perception (observer, obstacle detector), planning
 (MPC, MSF, weight function + FBL; the MicroLabBox), control (motion controller; the
-AutoBox), vehicle (the plant simulator, replaced by the CAN bridge on the car).
+AutoBox), vehicle (the plant simulator) and bridge (the CAN bridge, which replaces the
+simulator on the car: ``with_simulator:=false``).
 """
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
@@ -14,14 +15,16 @@ GROUPS = {
     "planning": ["mpc_planner", "msf_planner", "weight_fbl"],
     "control": ["motion_controller"],
     "vehicle": ["vehicle_simulator"],
+    "bridge": ["can_bridge"],
 }
 
 
 def nodes(context, *args, **kwargs):
     group = LaunchConfiguration("group").perform(context)
     names = [n for g in GROUPS.values() for n in g] if group == "all" else GROUPS[group]
-    if LaunchConfiguration("with_simulator").perform(context) != "true":
-        names = [n for n in names if n != "vehicle_simulator"]
+    # with the simulator its topics stand in for the vehicle bus; on the car the CAN bridge does
+    excluded = "can_bridge" if LaunchConfiguration("with_simulator").perform(context) == "true" else "vehicle_simulator"
+    names = [n for n in names if n != excluded]
     params_file = LaunchConfiguration("params_file").perform(context)
     common = {
         "scenario": LaunchConfiguration("scenario").perform(context),

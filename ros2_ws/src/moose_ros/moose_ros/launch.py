@@ -33,9 +33,14 @@ from .runtime import QOS_DEFAULT, QOS_SENSOR, DdsNode
 GRAPHS = {
     "full": ["vehicle_simulator", "observer", "obstacle_detector", "mpc_planner", "msf_planner", "weight_fbl",
              "motion_controller"],
-    "car": ["observer", "obstacle_detector", "mpc_planner", "msf_planner", "weight_fbl", "motion_controller"],
+    "car": ["observer", "obstacle_detector", "mpc_planner", "msf_planner", "weight_fbl", "motion_controller",
+            "can_bridge"],
+    "can": ["vehicle_simulator", "observer", "obstacle_detector", "mpc_planner", "msf_planner", "weight_fbl",
+            "motion_controller", "can_bridge"],
 }
-"""``full``: with the vehicle simulator; ``car``: the graph that runs on the vehicle (sensors from the CAN bridge)."""
+"""``full``: with the vehicle simulator on topics; ``car``: the graph that runs on the vehicle (sensors and
+actuators through the CAN bridge); ``can``: ``car`` plus the simulator as the vehicle-side ECU emulator
+behind the DBC, over ``udp_multicast`` here."""
 
 
 @dataclasses.dataclass
@@ -101,10 +106,11 @@ def launch(
     kill_after: Optional[tuple[str, float]] = None,
     out=sys.stdout,
     bag: Optional[Any] = None,
+    can_params: Optional[dict[str, Any]] = None,
 ) -> dict[str, Any]:
     """Run the graph once and return the summary (plus ``node_exits`` and ``diagnostics``)."""
     nodes = [n for n in GRAPHS[graph] if not (planner == "mpc" and n == "msf_planner") and not (planner == "msf" and n == "mpc_planner")]
-    common = dict(scenario_params, seed=seed, planner=planner)
+    common = dict(scenario_params, seed=seed, planner=planner, **(can_params or {}))
     procs: dict[str, subprocess.Popen] = {}
     lock = threading.Lock()
 
@@ -119,6 +125,7 @@ def launch(
         overrides = dict(common, use_sim_time=name != "vehicle_simulator")
         if name == "vehicle_simulator":
             overrides["rate"] = rate
+            overrides["vehicle_bus"] = "can" if "can_bridge" in nodes else "topics"
             overrides["wait_for"] = "[" + ", ".join(n for n in nodes if n != name) + "]"
         cmd = [sys.executable, "-m", "moose_ros.nodes", name]
         if params_file:
@@ -151,7 +158,7 @@ def launch(
                     if name != "vehicle_simulator":
                         with lock:
                             out.write(f"[launch] node {name} exited with status {code}; the graph keeps running\n")
-            if "vehicle_simulator" in exits or (graph == "car" and monitor.finished):
+            if "vehicle_simulator" in exits:
                 break
             if monitor.finished:
                 limit = min(limit, time.monotonic() + 15.0)  # the simulator is closing down

@@ -26,7 +26,7 @@ from moose.observer import StateObserver
 from moose.params import ParamError, replace
 from moose.scenario import adhoc_scenario, load_scenario
 from moose.sensors import Sensors
-from moose.signals import Blend, GpsSample, ImuSample, PlannerInput, Reference, StateEstimate, WheelSpeedSample
+from moose.signals import Blend, EpsSample, GpsSample, ImuSample, PlannerInput, Reference, StateEstimate, WheelSpeedSample
 from moose.vehicle import VehiclePlant, initial_state
 from moose.weight import WeightFunction
 
@@ -57,8 +57,75 @@ class GraphNode:
         return MaxSteeringTable.build(self.config.vehicle, self.config.maneuver)
 
 
+class TopicVehicleIo:
+    """The simulator's sensors and actuators as ROS topics."""
+
+    def __init__(self, node: "VehicleSimulator") -> None:
+        rt = node.rt
+        self.node = node
+        self.timeout = float(rt.param("command_timeout", 0.1))
+        self.u = np.zeros(3)
+        self.last_command = -math.inf
+        self.pub = {
+            ImuSample: (rt.publisher("sensor_msgs/msg/Imu", "/vehicle/imu", QOS_SENSOR), cv.imu_to_msg),
+            GpsSample: (rt.publisher("nav_msgs/msg/Odometry", "/vehicle/gps", QOS_DEFAULT), cv.gps_to_msg),
+            WheelSpeedSample: (rt.publisher("moose_msgs/msg/WheelSpeeds", "/vehicle/wheel_speeds", QOS_SENSOR), cv.wheels_to_msg),
+            EpsSample: (rt.publisher("moose_msgs/msg/SteeringReport", "/vehicle/steering", QOS_SENSOR), cv.steering_to_msg),
+        }
+        rt.subscription("moose_msgs/msg/ActuatorCommand", "/control/actuator_command", self.on_command, QOS_DEFAULT)
+
+    def on_command(self, msg: Any) -> None:
+        u = np.array([msg.steering_rate, msg.torque_rl, msg.torque_rr], dtype=float)
+        self.u = u if np.all(np.isfinite(u)) else np.zeros(3)
+        self.last_command = self.node.t
+
+    def send(self, sample: Any, t: float) -> None:
+        publish, convert = self.pub[type(sample)]
+        publish(convert(self.node.rt, sample))
+
+    def close(self) -> None:
+        """Nothing to release: topics go with the node."""
+
+    def command(self, t: float) -> np.ndarray:
+        if t - self.last_command <= self.timeout:
+            return self.u
+        if t > 1.0:
+            self.node.level, self.node.message = WARN, "actuator command timeout: zero torque, steering held"
+        return np.zeros(3)
+
+
+class CanVehicleIo:
+    """The vehicle-side ECUs: sensors as frames of config/kanon.dbc, commands from the bus (ECU emulator)."""
+
+    def __init__(self, node: "VehicleSimulator") -> None:
+        from moose.canbus.bus import open_bus
+        from moose.canbus.ecu import VehicleEcu
+
+        rt = node.rt
+        self.bus = open_bus(str(rt.param("can_interface", "udp_multicast")), str(rt.param("can_channel", "239.74.163.2")),
+                            port=rt.param("can_port"))
+        self.ecu = VehicleEcu(timeout=float(rt.param("command_timeout", 0.05)))
+
+    def send(self, sample: Any, t: float) -> None:
+        for frame in self.ecu.encode(sample, t):
+            self.bus.send(frame)
+
+    def close(self) -> None:
+        self.bus.shutdown()
+
+    def command(self, t: float) -> np.ndarray:
+        while (frame := self.bus.recv(timeout=0.0)) is not None:
+            self.ecu.on_frame(frame, t)
+        return self.ecu.plant_input(t)
+
+
 class VehicleSimulator(GraphNode):
-    """Plant, sensors and the scenario's obstacle; owns simulated time (/clock)."""
+    """Plant, sensors and the scenario's obstacle; owns simulated time (/clock).
+
+    ``vehicle_bus`` chooses how sensors and actuators are reached: ``topics`` (the
+    simulator publishes the sensor topics itself) or ``can`` (it is the vehicle-side ECU
+    emulator behind config/kanon.dbc, and the ``can_bridge`` node makes the topics).
+    """
 
     name = "vehicle_simulator"
 
@@ -71,23 +138,19 @@ class VehicleSimulator(GraphNode):
         self.sensors = Sensors(self.config.sensors, vehicle, np.random.default_rng(int(rt.param("seed", 0))))
         self.dt = 1.0 / self.config.simulation.motion_rate_hz
         self.steps = self.config.simulation.plant_steps_per_motion
-        self.timeout = float(rt.param("command_timeout", 0.1))
         self.end = self.scenario.lead_time + self.scenario.duration
         self.t = 0.0
-        self.u = np.zeros(3)
-        self.last_command = -math.inf
         self.appeared = False
         self.finished = False
         self.pub = {
             "clock": rt.publisher("rosgraph_msgs/msg/Clock", "/clock", QOS_CLOCK),
             "odom": rt.publisher("nav_msgs/msg/Odometry", "/vehicle/odom", QOS_SENSOR),
-            "imu": rt.publisher("sensor_msgs/msg/Imu", "/vehicle/imu", QOS_SENSOR),
-            "gps": rt.publisher("nav_msgs/msg/Odometry", "/vehicle/gps", QOS_DEFAULT),
-            "wheels": rt.publisher("moose_msgs/msg/WheelSpeeds", "/vehicle/wheel_speeds", QOS_SENSOR),
-            "steering": rt.publisher("moose_msgs/msg/SteeringReport", "/vehicle/steering", QOS_SENSOR),
             "obstacles": rt.publisher("moose_msgs/msg/ObstacleArray", "/perception/obstacles", QOS_LATCHED),
         }
-        rt.subscription("moose_msgs/msg/ActuatorCommand", "/control/actuator_command", self.on_command, QOS_DEFAULT)
+        bus = str(rt.param("vehicle_bus", "topics"))
+        if bus not in ("topics", "can"):
+            raise ParamError(f"vehicle_bus = {bus!r} is invalid: expected 'topics' or 'can'")
+        self.io = CanVehicleIo(self) if bus == "can" else TopicVehicleIo(self)
         # simulated time starts once every node named in ``wait_for`` has reported (startup of the graph)
         self.waiting = set(rt.param("wait_for", []) or [])
         self.startup_deadline = float(rt.param("startup_timeout", 60.0))
@@ -100,17 +163,10 @@ class VehicleSimulator(GraphNode):
         for status in msg.status:
             self.waiting.discard(status.name)
 
-    def on_command(self, msg: Any) -> None:
-        self.u = np.array([msg.steering_rate, msg.torque_rl, msg.torque_rr], dtype=float)
-        if not np.all(np.isfinite(self.u)):
-            self.u = np.zeros(3)
-        self.last_command = self.t
-
     def step(self) -> None:
         if self.finished:
             return
         if self.waiting:
-
             self.wall_start = self.wall_start or time.monotonic()
             if time.monotonic() - self.wall_start < self.startup_deadline:
                 return
@@ -121,13 +177,9 @@ class VehicleSimulator(GraphNode):
         clock.clock.sec, clock.clock.nanosec = int(math.floor(t)), int(round((t - math.floor(t)) * 1e9)) % 1_000_000_000
         self.pub["clock"](clock)
         state = self.plant.state
-        u = self.u if t - self.last_command <= self.timeout else np.array([0.0, 0.0, 0.0])
-        if t - self.last_command > self.timeout and t > 1.0:
-            self.level, self.message = WARN, "actuator command timeout: zero torque, steering held"
+        u = self.io.command(t)
         for sample in self.sensors.sample(t, state, self.plant.imu_specific_force(state, u)):
-            kind = {ImuSample: ("imu", cv.imu_to_msg), GpsSample: ("gps", cv.gps_to_msg),
-                    WheelSpeedSample: ("wheels", cv.wheels_to_msg)}.get(type(sample), ("steering", cv.steering_to_msg))
-            self.pub[kind[0]](kind[1](rt, sample))
+            self.io.send(sample, t)
         self.pub["odom"](cv.odometry_to_msg(rt, t, state))
         if not self.appeared and state[0] >= self.scenario.x_appear:
             self.appeared = True
@@ -137,6 +189,7 @@ class VehicleSimulator(GraphNode):
             self.finished = True
             self.message = "finished"
             self.publish_diagnostics()
+            self.io.close()
             rt.shutdown()
             return
         self.plant.step(u, self.steps)
@@ -326,6 +379,95 @@ class Motion(GraphNode):
         self.pub(cv.actuator_to_msg(self.rt, self.estimate.t, reference, u))
 
 
+class CanBridge(GraphNode):
+    """CAN bridge: actuator commands → guarded command frames; vehicle frames → the sensor topics.
+
+    The same sensor topics as the simulator's, so the graph cannot tell the difference.
+    The bus is polled and the command frames are sent every 10 ms (the command cycle).
+    Dropped frames are counted and reported on /diagnostics; a failing send marks a bus
+    error (heartbeat state "fault"), and the bus is reopened with a 1 s back-off.
+    ``can_log`` writes all traffic in candump format (python-can's ``.log``) or any
+    format python-can's Logger knows by its suffix.
+    """
+
+    name = "can_bridge"
+
+    def __init__(self, rt: Any) -> None:
+        super().__init__(rt)
+        import can as pycan
+
+        from moose.canbus.bridge import BridgeCore
+        from moose.canbus.safety import GuardParams
+
+        self._can = pycan
+        cfg = self.config.vehicle
+        self.bridge = BridgeCore(GuardParams(delta_max=cfg.delta_max, torque_max=cfg.T_max,
+                                             timeout=float(rt.param("command_timeout", 0.05))))
+        self.bus_args = (str(rt.param("can_interface", "udp_multicast")), str(rt.param("can_channel", "239.74.163.2")),
+                         rt.param("can_port"))
+        self.bus: Any = None
+        self.reopen_at = 0.0
+        self.open()
+        log = rt.param("can_log")
+        self.logger = pycan.Logger(str(log)) if log else None
+        self.pub = {
+            ImuSample: (rt.publisher("sensor_msgs/msg/Imu", "/vehicle/imu", QOS_SENSOR), cv.imu_to_msg),
+            GpsSample: (rt.publisher("nav_msgs/msg/Odometry", "/vehicle/gps", QOS_DEFAULT), cv.gps_to_msg),
+            WheelSpeedSample: (rt.publisher("moose_msgs/msg/WheelSpeeds", "/vehicle/wheel_speeds", QOS_SENSOR), cv.wheels_to_msg),
+            EpsSample: (rt.publisher("moose_msgs/msg/SteeringReport", "/vehicle/steering", QOS_SENSOR), cv.steering_to_msg),
+        }
+        rt.subscription("moose_msgs/msg/ActuatorCommand", "/control/actuator_command", self.on_command, QOS_DEFAULT)
+        rt.timer(0.01, self.tick)
+
+    def open(self) -> None:
+        from moose.canbus.bus import open_bus
+
+        interface, channel, port = self.bus_args
+        try:
+            self.bus = open_bus(interface, channel, port=port)
+            self.bridge.bus_error = False
+        except (OSError, self._can.CanError) as exc:
+            self.bus, self.bridge.bus_error = None, True
+            self.level, self.message = ERROR, f"bus {interface}:{channel} unavailable: {exc}"
+            self.reopen_at = time.monotonic() + 1.0
+
+    def on_command(self, msg: Any) -> None:
+        from moose.canbus.safety import Command
+
+        self.bridge.on_command(Command(msg.steering_angle, msg.steering_rate, msg.torque_rl, msg.torque_rr), self.rt.now())
+
+    def tick(self) -> None:
+        if self.bus is None:
+            if time.monotonic() >= self.reopen_at:
+                self.open()
+            return
+        t = self.rt.now()
+        try:
+            while (frame := self.bus.recv(timeout=0.0)) is not None:
+                if self.logger is not None:
+                    self.logger(frame)
+                sample = self.bridge.on_frame(frame, t)
+                if sample is not None:
+                    publish, convert = self.pub[type(sample)]
+                    publish(convert(self.rt, sample))
+            for frame in self.bridge.tick(t):
+                self.bus.send(frame)
+                if self.logger is not None:
+                    self.logger(frame)
+        except (OSError, self._can.CanError) as exc:
+            self.bridge.bus_error = True
+            self.level, self.message = ERROR, f"bus error: {exc}; reopening"
+            self.bus.shutdown()
+            self.bus, self.reopen_at = None, time.monotonic() + 1.0
+            return
+        stats = self.bridge.codec.stats
+        self.values = {"dropped_frames": stats.dropped, "bad_checksum": stats.bad_checksum,
+                       "bad_counter": stats.bad_counter, "command_timeout": self.bridge.guard.timed_out}
+        if self.level != ERROR:
+            self.level = WARN if self.bridge.guard.timed_out and t > 1.0 else OK
+            self.message = "command timeout: safe state" if self.level == WARN else "running"
+
+
 NODES: dict[str, Callable[[Any], GraphNode]] = {
     "vehicle_simulator": VehicleSimulator,
     "observer": Observer,
@@ -334,6 +476,7 @@ NODES: dict[str, Callable[[Any], GraphNode]] = {
     "msf_planner": lambda rt: Planner(rt, "msf"),
     "weight_fbl": WeightFbl,
     "motion_controller": Motion,
+    "can_bridge": CanBridge,
 }
 """Every node of the graph, by executable name."""
 
@@ -399,6 +542,7 @@ mpc_planner_main = _entry("mpc_planner")
 msf_planner_main = _entry("msf_planner")
 weight_fbl_main = _entry("weight_fbl")
 motion_controller_main = _entry("motion_controller")
+can_bridge_main = _entry("can_bridge")
 
 if __name__ == "__main__":
     if len(sys.argv) < 2:
