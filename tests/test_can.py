@@ -175,3 +175,31 @@ def test_bridge_and_ecu_over_a_virtual_bus() -> None:
 def test_unknown_interface_is_refused() -> None:
     with pytest.raises(ValueError, match="interface = 'serial'"):
         open_bus("serial", "x")
+
+
+def test_dump_decodes_and_replay_sends_a_recorded_log(tmp_path) -> None:
+    import io
+
+    from moose.canbus.tools import dump, replay
+
+    codec = Codec(DB)
+    path = tmp_path / "traffic.asc"
+    with can.Logger(str(path)) as logger:
+        for k in range(20):
+            frame = codec.encode("IMU", {"YawRate": 0.01 * k, "AccelX": 0.1, "AccelY": -0.2}, 1.0 + 0.01 * k)
+            logger(frame)
+        logger(can.Message(arbitration_id=0x123, data=b"\x01\x02", is_extended_id=False, timestamp=1.3))
+    sender, receiver = open_bus("virtual", "moose-test-replay"), open_bus("virtual", "moose-test-replay")
+    try:
+        assert replay(path, sender, rate=10.0) == 21
+        out = io.StringIO()
+        assert dump(receiver, out, count=21, duration=5.0) == 21
+    finally:
+        sender.shutdown()
+        receiver.shutdown()
+    lines = out.getvalue().splitlines()
+    assert lines[5].split()[3] == "IMU" or " IMU " in lines[5]
+    assert "YawRate=0.05" in lines[5]
+    assert "DROPPED (unknown_id)" in lines[-1]
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        replay(tmp_path / "missing.asc", sender)

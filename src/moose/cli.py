@@ -231,6 +231,29 @@ def _record(bag: Any, args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_can(args: argparse.Namespace) -> int:
+    from .canbus.bus import open_bus
+    from .canbus.tools import dump, replay
+
+    try:
+        bus = open_bus(args.interface, args.channel, port=args.port)
+    except ValueError as exc:
+        raise ParamError(str(exc)) from None
+    try:
+        if args.can_command == "dump":
+            dump(bus, sys.stdout, count=args.count, duration=args.duration)
+        else:
+            try:
+                print(f"sent {replay(args.file, bus, rate=args.rate)} frames")
+            except FileNotFoundError as exc:
+                raise ParamError(str(exc)) from None
+    except KeyboardInterrupt:
+        pass
+    finally:
+        bus.shutdown()
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="moose", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -287,6 +310,19 @@ def build_parser() -> argparse.ArgumentParser:
     replan.add_argument("--plot", help="write recorded vs re-computed references (PNG)")
     for parser_ in (record, play, info, export, replan):
         parser_.set_defaults(handler=cmd_bag)
+    can_parser = sub.add_parser("can", help="vehicle-bus tools (DBC config/kanon.dbc)")
+    can_sub = can_parser.add_subparsers(dest="can_command", required=True)
+    can_dump = can_sub.add_parser("dump", help="decode live frames with the DBC")
+    can_dump.add_argument("--count", type=int, help="stop after this many frames")
+    can_dump.add_argument("--duration", type=_positive_float, help="stop after this many seconds")
+    can_replay = can_sub.add_parser("replay", help="send a python-can log (.asc, .blf, .log, ...) onto the bus")
+    can_replay.add_argument("file")
+    can_replay.add_argument("--rate", type=_positive_float, default=1.0)
+    for parser_ in (can_dump, can_replay):
+        parser_.add_argument("--interface", default="udp_multicast", help="socketcan, udp_multicast or virtual")
+        parser_.add_argument("--channel", default="239.74.163.2", help="multicast group or socketcan device")
+        parser_.add_argument("--port", type=int, default=43113, help="UDP port (udp_multicast)")
+        parser_.set_defaults(handler=cmd_can)
     return parser
 
 
