@@ -203,3 +203,33 @@ def test_dump_decodes_and_replay_sends_a_recorded_log(tmp_path) -> None:
     assert "DROPPED (unknown_id)" in lines[-1]
     with pytest.raises(FileNotFoundError, match="does not exist"):
         replay(tmp_path / "missing.asc", sender)
+
+
+def test_bridge_node_reports_a_bus_error_and_recovers(monkeypatch: pytest.MonkeyPatch) -> None:
+    import time as _time
+
+    from moose_ros.nodes import CanBridge
+    from moose_ros.runtime import DdsNode
+
+    node = DdsNode("can_bridge", overrides={"can_interface": "virtual", "can_channel": "moose-test-buserror"})
+    bridge = CanBridge(node)
+    peer = open_bus("virtual", "moose-test-buserror")
+    try:
+        bridge.tick()
+        assert peer.recv(timeout=1.0) is not None  # commands flow
+        bridge.bus.shutdown()  # the interface goes away under the bridge (bus-off / unplugged adapter)
+        bridge.tick()
+        assert bridge.bridge.bus_error and bridge.level == 2 and "bus error" in bridge.message
+        assert bridge.bus is None
+        bridge.reopen_at = _time.monotonic()  # the 1 s back-off elapsed
+        bridge.tick()
+        assert bridge.bus is not None and not bridge.bridge.bus_error and bridge.level == 0
+        while peer.recv(timeout=0.0) is not None:
+            pass
+        bridge.tick()
+        assert peer.recv(timeout=1.0) is not None  # commanding again
+    finally:
+        peer.shutdown()
+        if bridge.bus is not None:
+            bridge.bus.shutdown()
+        node.shutdown()

@@ -426,6 +426,7 @@ class CanBridge(GraphNode):
         try:
             self.bus = open_bus(interface, channel, port=port)
             self.bridge.bus_error = False
+            self.level, self.message = OK, "running"
         except (OSError, self._can.CanError) as exc:
             self.bus, self.bridge.bus_error = None, True
             self.level, self.message = ERROR, f"bus {interface}:{channel} unavailable: {exc}"
