@@ -115,7 +115,8 @@ class StateObserver:
         if isinstance(sample, GpsSample):
             self._fuse_late_gps(sample)
             return
-        self._history.append((self._t, self._x.copy(), self._P.copy(), self._delta, self._ax, sample))
+        # x and P are replaced, never modified in place, so the snapshot can share them
+        self._history.append((self._t, self._x, self._P, self._delta, self._ax, sample))
         while self._history and self._history[0][0] < sample.t - self.params.history_s:
             self._history.popleft()
         self._apply(sample)
@@ -178,7 +179,7 @@ class StateObserver:
         self._gps_correct(fix)
         rebuilt: deque = deque(list(history)[:index])
         for sample in replay:
-            rebuilt.append((self._t, self._x.copy(), self._P.copy(), self._delta, self._ax, sample))
+            rebuilt.append((self._t, self._x, self._P, self._delta, self._ax, sample))
             self._apply(sample)
         self._history = rebuilt
         self._t = max(self._t, now)

@@ -133,7 +133,7 @@ class ClosedLoop:
         for k in range(n_motion + 1):
             t = k * dt_motion
             state = self.plant.state
-            specific_force = self.plant.imu_specific_force(state, u)
+            specific_force = self.plant.specific_force if k else self.plant.imu_specific_force(state, u)
             for sample in self.sensors.sample(t, state, specific_force):
                 samples.append(sample)
                 self.observer.update(sample)

@@ -145,7 +145,7 @@ class VehiclePlant:
         self._p = vehicle_vector(params)
         self._state = initial_state(params)
         self._t = 0.0
-        self._force: tuple[np.ndarray, np.ndarray, tuple[float, float]] | None = None
+        self._force: tuple[float, float] | None = None
 
     @property
     def state(self) -> np.ndarray:
@@ -175,9 +175,16 @@ class VehiclePlant:
             state = np.asarray(state, dtype=float).ravel()
         self._state = state
         force = np.asarray(force, dtype=float).ravel()
-        self._force = (self._state.copy(), u.copy(), (float(force[0]), float(force[1])))
+        self._force = (float(force[0]), float(force[1]))
         self._t += n * self.dt
         return self._state.copy()
+
+    @property
+    def specific_force(self) -> tuple[float, float]:
+        """IMU specific force at the current state under the input of the last ``step`` (computed by that step)."""
+        if self._force is None:
+            raise RuntimeError("specific_force is defined after the first step; use imu_specific_force(state, u)")
+        return self._force
 
     def derivatives(self, state: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Ẋ at (state, u)."""
@@ -185,8 +192,6 @@ class VehiclePlant:
 
     def imu_specific_force(self, state: np.ndarray, u: np.ndarray) -> tuple[float, float]:
         """Body specific force (a_x, a_y) = (v̇_x − v_y γ, v̇_y + v_x γ) an IMU at the CoG measures."""
-        if self._force is not None and np.array_equal(self._force[0], state) and np.array_equal(self._force[1], u):
-            return self._force[2]
         force = np.asarray(self._f(state, u, self._p)[1], dtype=float).ravel()
         return float(force[0]), float(force[1])
 
