@@ -18,7 +18,7 @@ from rosbags.rosbag2 import Reader
 
 from moose.config import load_config
 from moose_ros import convert as cv
-from moose_ros.bag import BagError, Recorder, bag_info, export_csv, play, read_bag, replan
+from moose_ros.bag import BagError, Recorder, bag_info, export, play, read_bag, replan
 from moose_ros.interfaces import from_rosbags
 from moose_ros.runtime import QOS_DEFAULT, DdsNode
 
@@ -118,9 +118,14 @@ def test_info_and_export(tmp_path: Path) -> None:
     assert info["duration_s"] == pytest.approx(9.0)
     assert info["topics"]["/perception/state"]["rate_hz"] == pytest.approx(100.0)
     assert info["topics"]["/planning/mpc"]["rate_hz"] == pytest.approx(5.0, rel=0.05)
-    files = export_csv(RELAXED, tmp_path, ["/perception/state"])
+    files = export(RELAXED, tmp_path, ["/perception/state"])
     lines = files[0].read_text().splitlines()
     assert lines[0].startswith("timestamp_ns,header.stamp.sec") and len(lines) == 902
+    import pyarrow.parquet as pq
+
+    (parquet,) = export(RELAXED, tmp_path / "pq", ["/planning/mpc"], fmt="parquet")
+    table = pq.read_table(parquet)
+    assert table.num_rows == 46 and "accel_y[0]" in table.column_names and "status" in table.column_names
 
 
 def test_replay_drives_the_observer_to_the_recorded_estimates(tmp_path: Path) -> None:

@@ -179,7 +179,7 @@ def cmd_bag(args: argparse.Namespace) -> int:
             for topic, e in info["topics"].items():
                 print(f"  {topic:<28} {e['type']:<36} {e['count']:>7}  {e['rate_hz']:8.2f} Hz")
         elif args.bag_command == "export":
-            for path in bag.export_csv(args.path, args.output, args.topics):
+            for path in bag.export(args.path, args.output, args.topics, args.format):
                 print(path)
         elif args.bag_command == "replan":
             from .config import load_config
@@ -298,7 +298,8 @@ def build_parser() -> argparse.ArgumentParser:
     play.add_argument("--clock", action="store_true", help="publish /clock from the bag's timestamps")
     info = bag_sub.add_parser("info", help="topics, types, counts, rates, duration")
     info.add_argument("path")
-    export = bag_sub.add_parser("export", help="export topics to CSV (one file per topic)")
+    export = bag_sub.add_parser("export", help="export topics to CSV or Parquet (one file per topic)")
+    export.add_argument("--format", choices=["csv", "parquet"], default="csv")
     export.add_argument("path")
     export.add_argument("-o", "--output", required=True, help="output folder")
     export.add_argument("--topics", nargs="+")

@@ -243,8 +243,11 @@ def flatten(msg: Any, prefix: str = "") -> dict[str, Any]:
     return out
 
 
-def export_csv(path: str | Path, out_dir: str | Path, topics: Optional[Sequence[str]] = None) -> list[Path]:
-    """One CSV per topic: ``timestamp_ns`` and the flattened fields."""
+def export(path: str | Path, out_dir: str | Path, topics: Optional[Sequence[str]] = None,
+           fmt: str = "csv") -> list[Path]:
+    """One file per topic (CSV or Parquet): ``timestamp_ns`` and the flattened fields."""
+    if fmt not in ("csv", "parquet"):
+        raise BagError(f"format = {fmt!r} is invalid: expected 'csv' or 'parquet'")
     rows: dict[str, list[dict[str, Any]]] = defaultdict(list)
     for m in read_bag(path, topics):
         rows[m.topic].append({"timestamp_ns": m.timestamp_ns, **flatten(m.msg)})
@@ -255,11 +258,18 @@ def export_csv(path: str | Path, out_dir: str | Path, topics: Optional[Sequence[
         columns: list[str] = []
         for row in items:
             columns.extend(k for k in row if k not in columns)
-        target = out_dir / (topic.strip("/").replace("/", "__") + ".csv")
-        with open(target, "w", newline="", encoding="utf-8") as handle:
-            writer = csv.DictWriter(handle, fieldnames=columns)
-            writer.writeheader()
-            writer.writerows(items)
+        target = out_dir / (topic.strip("/").replace("/", "__") + "." + fmt)
+        if fmt == "csv":
+            with open(target, "w", newline="", encoding="utf-8") as handle:
+                writer = csv.DictWriter(handle, fieldnames=columns)
+                writer.writeheader()
+                writer.writerows(items)
+        else:
+            import pyarrow as pa
+            import pyarrow.parquet as pq
+
+            table = pa.Table.from_pylist([{c: row.get(c) for c in columns} for row in items])
+            pq.write_table(table, target)
         written.append(target)
     return written
 
