@@ -57,6 +57,16 @@ class GraphNode:
         return MaxSteeringTable.build(self.config.vehicle, self.config.maneuver)
 
 
+def sensor_publishers(rt: Any) -> dict[type, tuple[Callable[[Any], None], Callable[[Any, Any], Any]]]:
+    """Publisher and converter of each sensor sample type: the vehicle's sensor topics."""
+    return {
+        ImuSample: (rt.publisher("sensor_msgs/msg/Imu", "/vehicle/imu", QOS_SENSOR), cv.imu_to_msg),
+        GpsSample: (rt.publisher("nav_msgs/msg/Odometry", "/vehicle/gps", QOS_DEFAULT), cv.gps_to_msg),
+        WheelSpeedSample: (rt.publisher("moose_msgs/msg/WheelSpeeds", "/vehicle/wheel_speeds", QOS_SENSOR), cv.wheels_to_msg),
+        EpsSample: (rt.publisher("moose_msgs/msg/SteeringReport", "/vehicle/steering", QOS_SENSOR), cv.steering_to_msg),
+    }
+
+
 class TopicVehicleIo:
     """The simulator's sensors and actuators as ROS topics."""
 
@@ -66,12 +76,7 @@ class TopicVehicleIo:
         self.timeout = float(rt.param("command_timeout", 0.1))
         self.u = np.zeros(3)
         self.last_command = -math.inf
-        self.pub = {
-            ImuSample: (rt.publisher("sensor_msgs/msg/Imu", "/vehicle/imu", QOS_SENSOR), cv.imu_to_msg),
-            GpsSample: (rt.publisher("nav_msgs/msg/Odometry", "/vehicle/gps", QOS_DEFAULT), cv.gps_to_msg),
-            WheelSpeedSample: (rt.publisher("moose_msgs/msg/WheelSpeeds", "/vehicle/wheel_speeds", QOS_SENSOR), cv.wheels_to_msg),
-            EpsSample: (rt.publisher("moose_msgs/msg/SteeringReport", "/vehicle/steering", QOS_SENSOR), cv.steering_to_msg),
-        }
+        self.pub = sensor_publishers(rt)
         rt.subscription("moose_msgs/msg/ActuatorCommand", "/control/actuator_command", self.on_command, QOS_DEFAULT)
 
     def on_command(self, msg: Any) -> None:
@@ -410,12 +415,7 @@ class CanBridge(GraphNode):
         self.open()
         log = rt.param("can_log")
         self.logger = pycan.Logger(str(log)) if log else None
-        self.pub = {
-            ImuSample: (rt.publisher("sensor_msgs/msg/Imu", "/vehicle/imu", QOS_SENSOR), cv.imu_to_msg),
-            GpsSample: (rt.publisher("nav_msgs/msg/Odometry", "/vehicle/gps", QOS_DEFAULT), cv.gps_to_msg),
-            WheelSpeedSample: (rt.publisher("moose_msgs/msg/WheelSpeeds", "/vehicle/wheel_speeds", QOS_SENSOR), cv.wheels_to_msg),
-            EpsSample: (rt.publisher("moose_msgs/msg/SteeringReport", "/vehicle/steering", QOS_SENSOR), cv.steering_to_msg),
-        }
+        self.pub = sensor_publishers(rt)
         rt.subscription("moose_msgs/msg/ActuatorCommand", "/control/actuator_command", self.on_command, QOS_DEFAULT)
         rt.timer(0.01, self.tick)
 
