@@ -23,19 +23,21 @@ def nodes(context, *args, **kwargs):
     group = LaunchConfiguration("group").perform(context)
     names = [n for g in GROUPS.values() for n in g] if group == "all" else GROUPS[group]
     # with the simulator its topics stand in for the vehicle bus; on the car the CAN bridge does
-    excluded = "can_bridge" if LaunchConfiguration("with_simulator").perform(context) == "true" else "vehicle_simulator"
+    simulated = LaunchConfiguration("with_simulator").perform(context) == "true"
+    excluded = "can_bridge" if simulated else "vehicle_simulator"
     names = [n for n in names if n != excluded]
     params_file = LaunchConfiguration("params_file").perform(context)
     common = {
         "scenario": LaunchConfiguration("scenario").perform(context),
         "planner": LaunchConfiguration("planner").perform(context),
     }
-    return [
-        Node(package="moose_ros", executable=name, name=name, output="screen",
-             parameters=[params_file, dict(common, use_sim_time=name != "vehicle_simulator")] if params_file
-             else [dict(common, use_sim_time=name != "vehicle_simulator")])
-        for name in names
-    ]
+    def parameters(name):
+        # simulated time only where the simulator publishes /clock; the car runs on wall-clock time
+        own = dict(common, use_sim_time=simulated and name != "vehicle_simulator")
+        return [params_file, own] if params_file else [own]
+
+    return [Node(package="moose_ros", executable=name, name=name, output="screen", parameters=parameters(name))
+            for name in names]
 
 
 def generate_launch_description():

@@ -122,7 +122,8 @@ def launch(
                 out.flush()
 
     for name in nodes:
-        overrides = dict(common, use_sim_time=name != "vehicle_simulator")
+        # simulated time only when the simulator is there to publish /clock (not on the car)
+        overrides = dict(common, use_sim_time="vehicle_simulator" in nodes and name != "vehicle_simulator")
         if name == "vehicle_simulator":
             overrides["rate"] = rate
             overrides["vehicle_bus"] = "can" if "can_bridge" in nodes else "topics"
