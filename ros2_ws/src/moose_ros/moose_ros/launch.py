@@ -17,7 +17,7 @@ import subprocess
 import sys
 import threading
 import time
-from typing import Any, Optional, Sequence
+from typing import Any, Optional
 
 import numpy as np
 
@@ -188,6 +188,3 @@ def launch(
     summary["odom_samples"] = len(monitor.odom)
     return summary
 
-
-def node_names() -> Sequence[str]:
-    return GRAPHS["full"]
