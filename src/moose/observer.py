@@ -1,22 +1,33 @@
 """State observer (Sec. III, Fig. 3): β, γ, θ, v_x, v_y and the position from IMU, GPS, wheel speeds and EPS.
 
-An extended Kalman filter on x̂ = [x, y, θ, v_x, v_y, γ].  Process model: the
-single-track dynamics of eqs. (trajdef), (eom), (fy), (alphas) with the
-measured steering angle δ (EPS) and the IMU's longitudinal specific force a_x
-as inputs (v̇_x = a_x + v_y γ, eq. (dvxnl)); speeds in the slip denominators
-bounded below by ``v_low`` as in the plant.  Measurements:
+An extended Kalman filter on x̂ = [x, y, θ, v_x, v_y, γ] (optionally augmented
+with the friction coefficient μ, see below).  Process model: the single-track
+dynamics of eqs. (trajdef), (eom), (fy), (alphas) with the measured steering
+angle δ (EPS) and the IMU's longitudinal specific force a_x as inputs
+(v̇_x = a_x + v_y γ, eq. (dvxnl)); speeds in the slip denominators bounded below
+by ``v_low`` as in the plant.  Measurements:
 
 * IMU yaw rate γ, and the IMU lateral specific force a_y against the model's
   (F_yf cos δ + F_yr) / m — this is what makes v_y (so β) observable;
-* rear wheel speeds: v_x ≈ r (ω_rl + ω_rr) / 2 (slip is absorbed by a larger
-  noise);
+* rear wheel speeds: v_x ≈ r (ω_rl + ω_rr) / 2 (the mean of the two rear wheel
+  ground speeds v_x ∓ γ b/2 is v_x; slip is absorbed by a larger noise);
 * GPS x, y, v_X, v_Y, delivered ``lag`` seconds after ``t_measured``.  The
   filter keeps a short history of snapshots and the samples since; a late
   fix restores the snapshot at its measurement time, is fused there, and the
   later samples are replayed (exact re-propagation; at 1 Hz this costs about
-  20 predict steps per fix).
+  20 predict steps per fix).  A fix older than the history is fused on arrival.
 
-Prediction runs at each IMU sample (explicit Euler over the sample interval).
+Prediction runs at each IMU sample (explicit Euler over the sample interval,
+inputs held from the previous samples); a wheel-speed, EPS or GPS sample
+stamped later than the last sample first predicts to its own time, so
+asynchronous sensors lose no propagation time.  Invalid samples (not a sensor
+record, non-finite fields, older than the last sample, a GPS fix measured after
+its delivery) raise before they touch the filter, which stays as it was.
+
+The lateral model's cornering stiffness is μ F_z B_y C_y, so a wrong model μ
+biases v_y and β (measured in docs/design.md).  With ``estimate_mu`` the state
+is augmented with μ as a random walk, observable through a_y, γ and the GPS
+velocity whenever the tyres carry lateral force, and kept in [mu_min, mu_max].
 """
 from __future__ import annotations
 
@@ -30,20 +41,29 @@ import casadi as ca
 import numpy as np
 
 from .ccompile import compile_function
-from .params import VehicleParams, check, non_negative, positive
+from .params import ParamError, VehicleParams, check, non_negative, positive
 from .signals import EpsSample, GpsSample, ImuSample, StateEstimate, WheelSpeedSample
 from .tire import pacejka
 from .vehicle import symbolic_params, vehicle_vector
 
 Sample = Union[ImuSample, GpsSample, WheelSpeedSample, EpsSample]
+_FIELDS: dict[type, tuple[str, ...]] = {
+    ImuSample: ("t", "ax", "ay", "yaw_rate"),
+    WheelSpeedSample: ("t", "omega_rl", "omega_rr"),
+    EpsSample: ("t", "delta"),
+    GpsSample: ("t", "t_measured", "x", "y", "vX", "vY"),
+}
+MU = 6
+"""Index of μ in the augmented state."""
 
 
 @dataclasses.dataclass(frozen=True)
 class ObserverParams:
-    """Noise model (SI units, standard deviations) and history length."""
+    """Noise model (SI units, standard deviations), history length and the optional μ estimation."""
 
     mu_model: float = 0.0
-    """Friction of the observer's tyre model; 0 uses the vehicle's μ (ROS 2 parameters cannot be null)."""
+    """Friction of the observer's tyre model (the initial value when estimated); 0 uses the vehicle's μ
+    (ROS 2 parameters cannot be null)."""
     q_position: float = 0.05
     q_yaw: float = 0.002
     q_vx: float = 0.3
@@ -58,11 +78,27 @@ class ObserverParams:
     r_gps_velocity: float = 0.05
     history_s: float = 1.5
     """How far back a late GPS fix can be fused (s)."""
+    estimate_mu: bool = False
+    """Augment the state with μ (random walk) instead of trusting ``mu_model``."""
+    q_mu: float = 0.02
+    """Process noise density of μ (per √s), used with ``estimate_mu``."""
+    mu_std0: float = 0.2
+    """Initial standard deviation of μ, used with ``estimate_mu``."""
+    mu_min: float = 0.1
+    mu_max: float = 1.2
+    """Range the estimated μ is kept in."""
 
     def __post_init__(self) -> None:
         check("mu_model", self.mu_model, non_negative, "a friction coefficient (0: the vehicle's)")
-        for f in dataclasses.fields(self)[1:]:
-            check(f.name, getattr(self, f.name), positive, "a positive number")
+        for name in ("q_position", "q_yaw", "q_vx", "q_vy", "q_yaw_rate", "r_yaw_rate", "r_lateral_accel",
+                     "r_wheel_speed", "r_gps_position", "r_gps_velocity", "history_s", "q_mu", "mu_std0",
+                     "mu_min", "mu_max"):
+            check(name, getattr(self, name), positive, "a positive number")
+        if not self.mu_min < self.mu_max:
+            raise ParamError(f"mu_min = {self.mu_min!r} is invalid: expected below mu_max = {self.mu_max!r}")
+        if self.estimate_mu and self.mu_model > 0.0 and not self.mu_min <= self.mu_model <= self.mu_max:
+            raise ParamError(f"mu_model = {self.mu_model!r} is invalid: expected within "
+                             f"[mu_min, mu_max] = [{self.mu_min!r}, {self.mu_max!r}] when μ is estimated")
 
 
 class StateObserver:
@@ -72,46 +108,79 @@ class StateObserver:
         self.params = params
         self.vehicle = vehicle
         self._mu = params.mu_model if params.mu_model > 0.0 else vehicle.mu
+        if params.estimate_mu:
+            self._mu = min(max(self._mu, params.mu_min), params.mu_max)
+        self._n = 7 if params.estimate_mu else 6
+        self._fn = _ekf(params.estimate_mu)
         self._pv = vehicle_vector(vehicle)
-        q = np.array([params.q_position, params.q_position, params.q_yaw, params.q_vx, params.q_vy, params.q_yaw_rate])
-        self._q = q**2
+        q = [params.q_position, params.q_position, params.q_yaw, params.q_vx, params.q_vy, params.q_yaw_rate]
+        self._q = np.array(q + [params.q_mu] * (self._n - 6)) ** 2
         self._r_imu = np.array([params.r_yaw_rate**2, params.r_lateral_accel**2])
+        self._r_gps = np.array([params.r_gps_position**2] * 2 + [params.r_gps_velocity**2] * 2)
         self.reset(initial or StateEstimate(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
 
     def reset(self, estimate: StateEstimate) -> None:
-        self._x = np.array([estimate.x, estimate.y, estimate.theta, estimate.vx, estimate.vy, estimate.gamma], dtype=float)
-        self._P = np.diag([0.05, 0.05, 0.01, 0.2, 0.2, 0.05]) ** 2
+        """Restart from ``estimate`` (μ from ``mu_model`` when estimated); forgets the history."""
+        x = [estimate.x, estimate.y, estimate.theta, estimate.vx, estimate.vy, estimate.gamma]
+        std = [0.05, 0.05, 0.01, 0.2, 0.2, 0.05]
+        if self._n == 7:
+            x.append(self._mu)
+            std.append(self.params.mu_std0)
+        self._x = np.array(x, dtype=float)
+        self._P = np.diag(std) ** 2
         self._t = estimate.t
         self._delta = estimate.delta
         self._ax = 0.0
         self._history: deque[tuple[float, np.ndarray, np.ndarray, float, float, Sample]] = deque()
 
     def estimate(self) -> StateEstimate:
+        """The estimate at the time of the last sample."""
         x = self._x
         return StateEstimate(self._t, float(x[0]), float(x[1]), float(x[2]), float(x[3]), float(x[4]), float(x[5]),
                              float(self._delta))
+
+    @property
+    def mu_estimate(self) -> float:
+        """The friction coefficient of the tyre model: estimated with ``estimate_mu``, else ``mu_model``."""
+        return float(self._x[MU]) if self._n == 7 else self._mu
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """Error covariance of [x, y, θ, v_x, v_y, γ (, μ)] (a copy)."""
+        return self._P.copy()
 
     # -- model (compiled) ----------------------------------------------------
     def _predict(self, dt: float) -> None:
         if dt <= 0.0:
             return
-        self._x, self._P = _ekf()["predict"](self._x, self._P, self._ax, self._delta, dt, self._pv, self._mu, self._q)
-        self._P = self._P.reshape(6, 6, order="F")
+        self._x, P = self._fn["predict"](self._x, self._P, self._ax, self._delta, dt, self._pv, self._mu, self._q)
+        self._P = P.reshape(self._n, self._n, order="F")
 
-    def _correct(self, H: np.ndarray, innovation: np.ndarray, R: np.ndarray) -> None:
-        """Kalman update with diagonal R, done as sequential scalar updates (exact for independent noise)."""
+    def _bound_mu(self) -> None:
+        """Keep an estimated μ in [mu_min, mu_max] (projection; x̂ is replaced, never modified in place)."""
+        if self._n == 7 and not self.params.mu_min <= self._x[MU] <= self.params.mu_max:
+            x = self._x.copy()
+            x[MU] = min(max(x[MU], self.params.mu_min), self.params.mu_max)
+            self._x = x
+
+    def _correct(self, H: np.ndarray, innovation: np.ndarray, r: np.ndarray) -> None:
+        """Kalman update with independent noises (variances ``r``), done as sequential scalar updates."""
         x0 = self._x
-        for row, nu, r in zip(H, innovation, np.diag(R)):
+        for row, nu, var in zip(H, innovation, r):
             PHt = self._P @ row
-            gain = PHt / (row @ PHt + r)
+            gain = PHt / (row @ PHt + var)
             self._x = self._x + gain * (nu - row @ (self._x - x0))
             self._P = self._P - np.outer(gain, PHt)
 
     # -- samples -----------------------------------------------------------
     def update(self, sample: Sample) -> None:
-        """Fuse one sample; samples must come in delivery-time order."""
-        if sample.t + 1e-9 < self._t:
-            raise ValueError(f"sample.t = {sample.t!r} is invalid: older than the last sample at {self._t!r}")
+        """Fuse one sample; samples must come in delivery-time order.
+
+        Raises ``TypeError`` for anything but the four sensor records and ``ValueError``
+        for a non-finite field, a sample older than the last one, or a GPS fix measured
+        after its delivery; the filter is left unchanged in each case.
+        """
+        self._validate(sample)
         if isinstance(sample, GpsSample):
             self._fuse_late_gps(sample)
             return
@@ -121,45 +190,72 @@ class StateObserver:
             self._history.popleft()
         self._apply(sample)
 
+    def _validate(self, sample: Sample) -> None:
+        fields = _FIELDS.get(type(sample))
+        if fields is None:
+            fields = next((f for kind, f in _FIELDS.items() if isinstance(sample, kind)), None)
+            if fields is None:
+                raise TypeError(f"sample = {sample!r} is not a sensor sample (ImuSample, GpsSample, "
+                                "WheelSpeedSample or EpsSample)")
+        for name in fields:
+            value = getattr(sample, name)
+            if not math.isfinite(value):
+                raise ValueError(f"sample.{name} = {value!r} is invalid: expected a finite number")
+        if sample.t + 1e-9 < self._t:
+            raise ValueError(f"sample.t = {sample.t!r} is invalid: older than the last sample at {self._t!r}")
+        if isinstance(sample, GpsSample) and sample.t_measured > sample.t + 1e-9:
+            raise ValueError(f"sample.t_measured = {sample.t_measured!r} is invalid: "
+                             f"after the fix's delivery at {sample.t!r}")
+
+    def _advance(self, t: float) -> None:
+        """Predict to ``t`` with the inputs held (no-op for a sample stamped with the last sample's time)."""
+        if t > self._t:
+            self._predict(t - self._t)
+            self._t = t
+
     def _apply(self, sample: Sample) -> None:
         p, prm = self.vehicle, self.params
         if isinstance(sample, ImuSample):
             dt = max(sample.t - self._t, 0.0)
-            x, P = _ekf()["imu"](self._x, self._P, self._ax, self._delta, dt, sample.yaw_rate, sample.ay,
-                                 self._pv, self._mu, self._q, self._r_imu)
-            self._x, self._P = x, P.reshape(6, 6, order="F")
+            x, P = self._fn["imu"](self._x, self._P, self._ax, self._delta, dt, sample.yaw_rate, sample.ay,
+                                   self._pv, self._mu, self._q, self._r_imu)
+            self._x, self._P = x, P.reshape(self._n, self._n, order="F")
+            self._bound_mu()
             self._t = sample.t
             self._ax = sample.ax
         elif isinstance(sample, WheelSpeedSample):
-            self._t = max(self._t, sample.t)
+            self._advance(sample.t)
             v_wheels = 0.5 * p.r * (sample.omega_rl + sample.omega_rr)
             PHt = self._P[:, 3].copy()  # H = e_vx
             gain = PHt / (PHt[3] + prm.r_wheel_speed**2)
             self._x = self._x + gain * (v_wheels - self._x[3])
             self._P = self._P - np.outer(gain, PHt)
+            self._bound_mu()
         elif isinstance(sample, EpsSample):
-            self._t = max(self._t, sample.t)
+            self._advance(sample.t)
             self._delta = sample.delta
-        elif isinstance(sample, GpsSample):
-            self._gps_correct(sample)
         else:
-            raise TypeError(f"sample = {sample!r} is not a sensor sample")
+            raise TypeError(f"sample = {sample!r} is not a replayable sensor sample")
 
     def _gps_correct(self, fix: GpsSample) -> None:
-        prm, x = self.params, self._x
+        x = self._x
         theta, vx, vy = x[2], x[3], x[4]
         c, s = math.cos(theta), math.sin(theta)
-        H = np.zeros((4, 6))
+        H = np.zeros((4, self._n))
         H[0, 0] = H[1, 1] = 1.0
         H[2, 2], H[2, 3], H[2, 4] = -vx * s - vy * c, c, -s
         H[3, 2], H[3, 3], H[3, 4] = vx * c - vy * s, s, c
         h = np.array([x[0], x[1], vx * c - vy * s, vx * s + vy * c])
         z = np.array([fix.x, fix.y, fix.vX, fix.vY])
-        R = np.diag([prm.r_gps_position**2] * 2 + [prm.r_gps_velocity**2] * 2)
-        self._correct(H, z - h, R)
+        self._correct(H, z - h, self._r_gps)
+        self._bound_mu()
 
     def _fuse_late_gps(self, fix: GpsSample) -> None:
         """Fuse a fix at its measurement time and replay the samples delivered since."""
+        if fix.t_measured >= self._t:  # not older than the filter: predict to it and fuse
+            self._advance(fix.t_measured)
+            self._gps_correct(fix)
+            return
         history = self._history
         index = None
         for i in range(len(history) - 1, -1, -1):
@@ -170,15 +266,16 @@ class StateObserver:
             self._gps_correct(fix)  # older than the history: fuse now (documented degradation)
             return
         t0, x0, P0, delta0, ax0, _ = history[index]
-        replay = [entry[5] for entry in list(history)[index:]]
+        entries = list(history)
         now = self._t
-        self._t, self._x, self._P, self._delta, self._ax = t0, x0.copy(), P0.copy(), delta0, ax0
+        self._t, self._x, self._P, self._delta, self._ax = t0, x0, P0, delta0, ax0
         # predict from the snapshot to the measurement time, fuse, then replay
         self._predict(fix.t_measured - t0)
         self._t = max(t0, fix.t_measured)
         self._gps_correct(fix)
-        rebuilt: deque = deque(list(history)[:index])
-        for sample in replay:
+        rebuilt: deque = deque(entries[:index])
+        for entry in entries[index:]:
+            sample = entry[5]
             rebuilt.append((self._t, self._x, self._P, self._delta, self._ax, sample))
             self._apply(sample)
         self._history = rebuilt
@@ -186,42 +283,51 @@ class StateObserver:
 
 
 @lru_cache(maxsize=None)
-def _ekf() -> dict[str, Any]:
+def _ekf(estimate_mu: bool = False) -> dict[str, Any]:
     """Compiled EKF steps, parametric in the vehicle: ``predict`` and ``imu`` (predict + γ, a_y updates).
 
     The process model is eqs. (trajdef), (eom) with the Pacejka law eq. (fy) on the slip
-    angles eq. (alphas) (speeds bounded below by v_low); Jacobians by CasADi's AD.
+    angles eq. (alphas) (speeds bounded below by v_low); Jacobians by CasADi's AD.  With
+    ``estimate_mu`` the state has a seventh entry μ (μ̇ = 0 plus process noise) and the
+    ``mu`` argument is unused.
     """
-    x = ca.SX.sym("x", 6)
-    P = ca.SX.sym("P", 6, 6)
-    ax, delta, dt, mu = ca.SX.sym("ax"), ca.SX.sym("delta"), ca.SX.sym("dt"), ca.SX.sym("mu")
+    n = 7 if estimate_mu else 6
+    x = ca.SX.sym("x", n)
+    P = ca.SX.sym("P", n, n)
+    ax, delta, dt, mu_in = ca.SX.sym("ax"), ca.SX.sym("delta"), ca.SX.sym("dt"), ca.SX.sym("mu")
     z_gamma, z_ay = ca.SX.sym("z_gamma"), ca.SX.sym("z_ay")
-    q, r = ca.SX.sym("q", 6), ca.SX.sym("r", 2)
+    q, r = ca.SX.sym("q", n), ca.SX.sym("r", 2)
     pv, p = symbolic_params()
     theta, vx, vy, gamma = x[2], x[3], x[4], x[5]
+    mu = x[MU] if estimate_mu else mu_in
     v_bar = ca.fmax(vx, p.v_low)
     fyf = pacejka(delta - (vy + p.lf * gamma) / v_bar, mu * p.Fzf, p.By, p.Cy, ops=ca)
     fyr = pacejka(-(vy - p.lr * gamma) / v_bar, mu * p.Fzr, p.By, p.Cy, ops=ca)
     lateral = (fyf * ca.cos(delta) + fyr) / p.m  # the IMU's a_y
-    xdot = ca.vertcat(vx * ca.cos(theta) - vy * ca.sin(theta), vx * ca.sin(theta) + vy * ca.cos(theta), gamma,
-                      ax + vy * gamma, lateral - vx * gamma, (fyf * ca.cos(delta) * p.lf - fyr * p.lr) / p.Izz)
+    rates = [vx * ca.cos(theta) - vy * ca.sin(theta), vx * ca.sin(theta) + vy * ca.cos(theta), gamma,
+             ax + vy * gamma, lateral - vx * gamma, (fyf * ca.cos(delta) * p.lf - fyr * p.lr) / p.Izz]
+    xdot = ca.vertcat(*rates, *([ca.SX(0)] if estimate_mu else []))
     x_pred = x + dt * xdot
     F = ca.jacobian(x_pred, x)
     P_pred = F @ P @ F.T + ca.diag(q * dt)
-    predict = ca.Function("moose_ekf_predict", [x, P, ax, delta, dt, pv, mu, q], [x_pred, P_pred])
+    prefix = "moose_ekf_mu" if estimate_mu else "moose_ekf"
+    predict = ca.Function(f"{prefix}_predict", [x, P, ax, delta, dt, pv, mu_in, q], [x_pred, P_pred])
     # sequential scalar updates at the predicted state: gamma, then a_y (linearised)
-    h_ay = ca.Function("h_ay", [x, delta, pv, mu], [lateral])
+    h_ay = ca.Function("h_ay", [x, delta, pv, mu_in], [lateral])
     H_ay = ca.jacobian(lateral, x)
+    e_gamma = ca.DM.zeros(1, n)
+    e_gamma[0, 5] = 1.0
     xs, Ps = x_pred, P_pred
     for H, innovation, noise in (
-        (ca.DM([[0, 0, 0, 0, 0, 1]]), z_gamma - x_pred[5], r[0]),
-        (ca.substitute(H_ay, x, x_pred), z_ay - h_ay(x_pred, delta, pv, mu), r[1]),
+        (e_gamma, z_gamma - x_pred[5], r[0]),
+        (ca.substitute(H_ay, x, x_pred), z_ay - h_ay(x_pred, delta, pv, mu_in), r[1]),
     ):
         PHt = Ps @ H.T
         gain = PHt / (H @ PHt + noise)
         xs = xs + gain * (innovation - H @ (xs - x_pred))
         Ps = Ps - gain @ PHt.T
-    imu = ca.Function("moose_ekf_imu", [x, P, ax, delta, dt, z_gamma, z_ay, pv, mu, q, r], [xs, 0.5 * (Ps + Ps.T)])
+    imu = ca.Function(f"{prefix}_imu", [x, P, ax, delta, dt, z_gamma, z_ay, pv, mu_in, q, r],
+                      [xs, 0.5 * (Ps + Ps.T)])
     return {name: _compiled(fn) for name, fn in (("predict", predict), ("imu", imu))}
 
 
