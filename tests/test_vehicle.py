@@ -4,38 +4,58 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from moose.params import VehicleParams
-from moose.vehicle import DELTA, GAMMA, OMEGA_RL, THETA, VX, VY, X, Y, VehiclePlant, initial_state
+from moose.params import ParamError, VehicleParams
+from moose.vehicle import (
+    DELTA, GAMMA, OMEGA_RL, OMEGA_RR, THETA, VX, VY, X, Y, VehiclePlant, initial_state, slip_time_constant,
+    RK4_STABILITY as RK4_LIMIT,
+)
 
 P = VehicleParams()
 
 
-def steady(params: VehicleParams, delta: float, vx: float = 7.0, seconds: float = 4.0) -> np.ndarray:
+def steady(params: VehicleParams, delta: float, vx: float = 7.0, seconds: float = 4.0,
+           torque: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
     plant = VehiclePlant(params)
     state = initial_state(params, vx=vx)
     state[DELTA] = delta
     plant.reset(state)
-    for _ in range(int(seconds * 100)):
-        plant.step(np.zeros(3), 10)
+    plant.step(np.array([0.0, *torque]), int(seconds * 1000))
     return plant.state
+
+
+def test_straight_running_is_an_equilibrium() -> None:
+    plant = VehiclePlant(P)
+    xdot = plant.derivatives(initial_state(P, x=1.0, y=2.0, theta=0.5, vx=6.0), np.zeros(3))
+    assert xdot[X] == pytest.approx(6.0 * np.cos(0.5)) and xdot[Y] == pytest.approx(6.0 * np.sin(0.5))
+    assert np.all(xdot[THETA:] == 0.0)
 
 
 @pytest.mark.parametrize("vx", [4.0, 7.0])
 def test_small_steer_yaw_rate_matches_linear_bicycle(vx: float) -> None:
     delta = 0.01
     state = steady(P, delta, vx)
-    c_f = P.mu * P.Fzf * P.By * P.Cy
+    c_f = P.mu * P.Fzf * P.By * P.Cy  # cornering stiffness: slope of eq. (fy) at alpha = 0
     c_r = P.mu * P.Fzr * P.By * P.Cy
+    # understeer gradient (rad per m/s^2): zero here, since static loads make C_f / C_r = l_r / l_f (neutral steer)
     k_us = P.m / P.wheelbase * (P.lr / c_f - P.lf / c_r)
-    gamma_theory = state[VX] * delta / (P.wheelbase + k_us * state[VX] ** 2)
-    assert state[GAMMA] == pytest.approx(gamma_theory, rel=0.03)
+    v = state[VX]
+    gamma_theory = v * delta / (P.wheelbase + k_us * v**2)
+    beta_theory = gamma_theory * (P.lr / v - P.m * P.lf * v / (P.wheelbase * c_r))
+    assert state[GAMMA] == pytest.approx(gamma_theory, rel=0.005)
+    assert state[VY] / v == pytest.approx(beta_theory, rel=0.02, abs=2e-6)
+    # steady cornering: the IMU's lateral specific force is the centripetal v_x gamma
+    plant = VehiclePlant(P)
+    assert plant.imu_specific_force(state, np.zeros(3))[1] == pytest.approx(v * state[GAMMA], rel=1e-3)
 
 
 def test_mirror_symmetry() -> None:
-    left, right = steady(P, 0.05, seconds=2.0), steady(P, -0.05, seconds=2.0)
-    for i in (Y, THETA, VY, GAMMA):
+    left = steady(P, 0.05, seconds=2.0, torque=(60.0, 20.0))
+    right = steady(P, -0.05, seconds=2.0, torque=(20.0, 60.0))
+    for i in (Y, THETA, VY, GAMMA, DELTA):
         assert left[i] == pytest.approx(-right[i], abs=1e-9)
-    assert left[X] == pytest.approx(right[X], abs=1e-9)
+    for i, j in ((X, X), (VX, VX), (OMEGA_RL, OMEGA_RR), (OMEGA_RR, OMEGA_RL)):
+        assert left[i] == pytest.approx(right[j], abs=1e-9)
+    assert abs(left[GAMMA]) > 0.05  # the test is not trivially symmetric
 
 
 def test_steering_rate_and_angle_limits() -> None:
@@ -43,11 +63,33 @@ def test_steering_rate_and_angle_limits() -> None:
     plant = VehiclePlant(p)
     plant.reset(initial_state(p, vx=5.0))
     plant.step(np.array([50.0, 0.0, 0.0]), 100)  # 0.1 s at the rate limit
-    assert plant.state[DELTA] == pytest.approx(0.1, abs=1e-6)
-    plant.step(np.array([50.0, 0.0, 0.0]), 1000)
-    assert plant.state[DELTA] == pytest.approx(p.delta_max, abs=1e-12)
+    assert plant.state[DELTA] == pytest.approx(0.1, abs=1e-9)
+    history = [plant.step(np.array([50.0, 0.0, 0.0]), 1)[DELTA] for _ in range(400)]
+    assert max(history) == p.delta_max  # reaches the stop exactly, never beyond
+    assert np.all(np.diff(history) >= 0.0)  # no chattering at the stop
+    assert history[199] == pytest.approx(p.delta_max, abs=1e-12)
     plant.step(np.array([-50.0, 0.0, 0.0]), 10)
-    assert plant.state[DELTA] == pytest.approx(p.delta_max - 0.01, abs=1e-6)
+    assert plant.state[DELTA] == pytest.approx(p.delta_max - 0.01, abs=1e-9)
+
+
+def test_fast_actuator_stops_at_the_limit_within_one_step() -> None:
+    plant = VehiclePlant(P)  # Table I: 2618 rad/s
+    plant.reset(initial_state(P, vx=7.0))
+    plant.step(np.array([1e4, 0.0, 0.0]), 1)
+    assert plant.state[DELTA] == P.delta_max
+    plant.step(np.array([1e4, 0.0, 0.0]), 1)
+    assert plant.state[DELTA] == P.delta_max
+    # the forces of that step are those of the clipped angle: the yaw rate stays plausible
+    assert 0.0 < plant.state[GAMMA] < 0.05
+    plant.step(np.array([-100.0, 0.0, 0.0]), 1)
+    assert plant.state[DELTA] == pytest.approx(P.delta_max - 0.1, abs=1e-12)
+
+
+def test_reset_refuses_a_steering_angle_beyond_the_limit() -> None:
+    state = initial_state(P)
+    state[DELTA] = P.delta_max + 0.01
+    with pytest.raises(ValueError, match="DELTA"):
+        VehiclePlant(P).reset(state)
 
 
 def test_standstill_stays_at_rest_and_torque_is_clipped() -> None:
@@ -58,8 +100,59 @@ def test_standstill_stays_at_rest_and_torque_is_clipped() -> None:
     plant.step(np.array([0.0, 1e4, 1e4]), 1000)  # clipped to T_max
     state = plant.state
     assert np.all(np.isfinite(state))
-    # at most the traction limit mu F_zr / m over one second
-    assert 0.0 < state[VX] <= P.mu * P.Fzr / P.m * 1.0 + 1e-6
+    # at most the traction limit mu F_zr / m over one second, at most T_max per wheel
+    assert 0.0 < state[VX] <= min(P.mu * P.Fzr, 2 * P.T_max / P.r) / P.m * 1.0 + 1e-6
+    clipped = VehiclePlant(P)
+    clipped.reset(initial_state(P, vx=0.0))
+    clipped.step(np.array([0.0, P.T_max, P.T_max]), 1000)
+    assert clipped.state == pytest.approx(state, abs=1e-12)
+
+
+def test_wheel_slip_decays_without_oscillation_at_standstill() -> None:
+    """The v_low bound keeps the stiff slip ODE stable under RK4 at 1 kHz (mu = 1, worst case)."""
+    p = VehicleParams(mu=1.0)
+    plant = VehiclePlant(p)
+    state = initial_state(p)
+    state[[OMEGA_RL, OMEGA_RR]] = 2.0  # spinning wheels on a car at rest
+    plant.reset(state)
+    slips = []
+    for _ in range(16):
+        s = plant.step(np.zeros(3), 1)
+        slips.append(p.r * s[OMEGA_RL] - s[VX])
+    slips = np.array(slips)
+    assert np.all(np.isfinite(slips)) and np.all(slips > 0.0) and np.all(np.diff(slips) < 0.0)
+    # once the slip is small, each step multiplies it by RK4's amplification factor
+    # R(z) = 1 + z + z^2/2 + z^3/6 + z^4/24 at z = -dt / tau_lambda (|R| < 1: stable)
+    z = -1e-3 / slip_time_constant(p, p.v_low)
+    assert -RK4_LIMIT < z < -1.0  # a stiff case: explicit Euler (|1 + z| < 1 needs z > -2) is near its edge
+    amplification = 1 + z + z**2 / 2 + z**3 / 6 + z**4 / 24
+    assert np.all(slips[9:] / slips[8:-1] == pytest.approx(amplification, rel=0.01))
+    assert plant.state[VX] < 0.05  # the wheels' momentum only nudges the car
+
+
+def test_slip_time_constant_matches_the_linearised_plant() -> None:
+    plant = VehiclePlant(P)
+    state = initial_state(P, vx=8.0)
+    u = np.zeros(3)
+    eps = 1e-6
+    # Jacobian of the (wheel, v_x) subsystem by central differences of the plant's own derivatives
+    rows = []
+    for i in (OMEGA_RL, OMEGA_RR, VX):
+        dp, dm = state.copy(), state.copy()
+        dp[i] += eps
+        dm[i] -= eps
+        rows.append((plant.derivatives(dp, u) - plant.derivatives(dm, u))[[OMEGA_RL, OMEGA_RR, VX]] / (2 * eps))
+    jac = np.array(rows).T
+    fastest = -np.min(np.linalg.eigvals(jac).real)
+    assert fastest == pytest.approx(1.0 / slip_time_constant(P, 8.0), rel=0.02)
+
+
+def test_unstable_step_is_refused() -> None:
+    with pytest.raises(ParamError, match="dt = "):
+        VehiclePlant(P, dt=0.02)
+    with pytest.raises(ParamError, match="dt = "):
+        VehiclePlant(VehicleParams(mu=3.0, v_low=2.0))
+    VehiclePlant(VehicleParams(mu=3.0, v_low=3.0))  # a higher bound restores stability
 
 
 def test_torque_accelerates_like_the_nominal_plant() -> None:
@@ -73,31 +166,41 @@ def test_torque_accelerates_like_the_nominal_plant() -> None:
     assert plant.state[OMEGA_RL] * P.r > plant.state[VX]  # driving slip
 
 
-def test_rk4_converges() -> None:
-    coarse, fine = VehiclePlant(P, dt=2e-3), VehiclePlant(P, dt=1e-3)
-    for plant in (coarse, fine):
+def test_rk4_converges_with_fourth_order() -> None:
+    def run(dt: float) -> np.ndarray:
+        plant = VehiclePlant(P, dt=dt)
         plant.reset(initial_state(P, vx=7.0))
-    for _ in range(100):
-        coarse.step(np.array([0.3, 20.0, 20.0]), 5)
-        fine.step(np.array([0.3, 20.0, 20.0]), 10)
-    assert np.max(np.abs(coarse.state - fine.state)) < 1e-3
+        plant.step(np.array([0.2, 60.0, 20.0]), int(round(1.0 / dt)))
+        return plant.state
+
+    reference, fine, coarse = run(2.5e-4), run(1e-3), run(2e-3)
+    scale = np.maximum(np.abs(reference), 1.0)
+    e_fine = np.max(np.abs(fine - reference) / scale)
+    e_coarse = np.max(np.abs(coarse - reference) / scale)
+    assert e_fine < 1e-5
+    assert 8.0 < e_coarse / e_fine < 32.0  # 2^4 = 16 for a fourth-order method
 
 
 def test_friction_bounds_lateral_acceleration() -> None:
+    peaks = {}
     for mu in (0.3, 0.8):
         p = VehicleParams(mu=mu)
         plant = VehiclePlant(p)
-        plant.reset(initial_state(p, vx=7.0))
+        plant.reset(initial_state(p, vx=10.0))  # fast enough that delta_max saturates both axles
         peak = 0.0
         for _ in range(200):
             plant.step(np.array([2.0, 0.0, 0.0]), 10)
-            peak = max(peak, abs(plant.imu_specific_force(plant.state, np.array([2.0, 0.0, 0.0]))[1]))
-        assert 0.8 * mu * p.g < peak <= 1.02 * mu * p.g
+            peak = max(peak, abs(plant.specific_force[1]))
+        peaks[mu] = peak
+        assert 0.95 * mu * p.g < peak <= mu * p.g * (1 + 1e-9)
+    assert peaks[0.8] / peaks[0.3] == pytest.approx(0.8 / 0.3, rel=0.03)
 
 
 def test_bad_input_is_refused() -> None:
     plant = VehiclePlant(P)
     with pytest.raises(ValueError, match="u = "):
         plant.step(np.array([np.nan, 0.0, 0.0]))
+    with pytest.raises(ValueError, match="n = "):
+        plant.step(np.zeros(3), 0)
     with pytest.raises(ValueError, match="state = "):
         plant.reset(np.zeros(4))

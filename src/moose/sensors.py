@@ -1,15 +1,32 @@
 """Simulated sensors of the FPEV2-Kanon (Sec. V): IMU, GPS (1 Hz, lagged), wheel speeds, EPS angle.
 
-Each sensor samples the true plant state on its own schedule and adds
-zero-mean Gaussian noise from one seeded generator, so a run is reproducible.
-The GPS fix taken at ``t_measured`` reaches the observer ``gps_lag_s`` later
-(the paper's "communication delays in reading the GPS signal").  Default noise
-levels are those of an automotive MEMS IMU, an RTK receiver and encoder-based
-wheel and steering sensors (docs/design.md).
+Each sensor samples the true plant state on its own schedule (sample k of a
+sensor at rate f is due at t = k / f) and adds zero-mean Gaussian noise from
+one seeded generator, so a run is reproducible for a seed.  The GPS fix taken
+at ``t_measured`` reaches the observer ``gps_lag_s`` later (the paper's
+"communication delays in reading the GPS signal"; Sec. V: GPS at 1 Hz) through
+a delay buffer.
+
+Default noise (1σ), per sample:
+
+* accelerometer 0.05 m/s² — automotive MEMS IMUs have a noise density of
+  100–300 µg/√Hz (≈ 0.01–0.03 m/s² over a 50 Hz bandwidth); the margin stands
+  for chassis vibration;
+* gyro 0.002 rad/s (0.11 °/s) — 0.01–0.02 °/s/√Hz over 50 Hz;
+* wheel speed 0.05 rad/s (0.015 m/s at the tread) — the filtered speed
+  signal of an in-wheel motor's resolver-based inverter;
+* EPS angle 0.001 rad — a 12-bit absolute steering-column encoder behind the
+  rack ratio;
+* GPS position 0.02 m and velocity 0.03 m/s — RTK fixed solution (the paper's
+  car drives a campus field with an RTK receiver; a plain GNSS fix of ~2 m
+  would make a 0.5 m lateral margin meaningless).
+
+Biases and scale errors are not modelled (the paper gives none).
 """
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections import deque
 from typing import Union
 
@@ -21,22 +38,33 @@ from .vehicle import DELTA, GAMMA, OMEGA_RL, OMEGA_RR, THETA, VX, VY, X, Y
 
 Sample = Union[ImuSample, GpsSample, WheelSpeedSample, EpsSample]
 
+_TICK_TOLERANCE = 1e-6
+"""Fraction of a sample period by which a call may precede a sample's due time (float round-off of k · dt)."""
+
 
 @dataclasses.dataclass(frozen=True)
 class SensorParams:
-    """Rates (Hz), GPS lag (s) and noise standard deviations (SI units)."""
+    """Rates (Hz), GPS lag (s) and noise standard deviations (SI units); see the module docstring."""
 
     imu_rate_hz: float = 100.0
     wheel_rate_hz: float = 100.0
     eps_rate_hz: float = 100.0
     gps_rate_hz: float = 1.0
+    """Paper, Sec. V: GPS updated at 1 Hz."""
     gps_lag_s: float = 0.2
+    """Delay between a GPS fix and its delivery (s)."""
     accel_std: float = 0.05
+    """Accelerometer noise, each axis (m/s^2)."""
     gyro_std: float = 0.002
+    """Yaw-rate gyro noise (rad/s)."""
     wheel_std: float = 0.05
+    """Wheel-speed noise, each wheel (rad/s)."""
     eps_std: float = 0.001
+    """Steering-angle noise (rad)."""
     gps_pos_std: float = 0.02
+    """GPS position noise, each axis (m)."""
     gps_vel_std: float = 0.03
+    """GPS velocity noise, each axis (m/s)."""
 
     def __post_init__(self) -> None:
         for name in ("imu_rate_hz", "wheel_rate_hz", "eps_rate_hz", "gps_rate_hz"):
@@ -46,40 +74,51 @@ class SensorParams:
 
 
 class Sensors:
-    """All sensors of the car; :meth:`sample` returns what is delivered at time ``t``."""
+    """All sensors of the car; :meth:`sample` returns what is delivered at time ``t``.
+
+    Call it at least as often as the fastest sensor (the closed loop calls it at
+    every motion tick); a sensor whose samples fall between two calls delivers
+    one sample at the later call (no bursts of stale samples).
+    """
 
     def __init__(self, params: SensorParams, vehicle: VehicleParams, rng: np.random.Generator) -> None:
         self.params = params
         self.vehicle = vehicle
         self.rng = rng
-        self._next = {"imu": 0.0, "wheel": 0.0, "eps": 0.0, "gps": 0.0}
+        self._rates = {"imu": params.imu_rate_hz, "wheel": params.wheel_rate_hz, "eps": params.eps_rate_hz,
+                       "gps": params.gps_rate_hz}
+        self._last: dict[str, float] = {name: -math.inf for name in self._rates}
         self._pending: deque[GpsSample] = deque()
 
-    def _due(self, name: str, t: float, rate: float) -> bool:
-        if t + 1e-9 < self._next[name]:
+    def _due(self, name: str, t: float) -> bool:
+        """True once per sample index k = ⌊t f⌋ of sensor ``name``."""
+        index = math.floor(t * self._rates[name] + _TICK_TOLERANCE)
+        if index <= self._last[name]:
             return False
-        self._next[name] += 1.0 / rate
+        self._last[name] = index
         return True
 
     def sample(self, t: float, state: np.ndarray, specific_force: tuple[float, float]) -> list[Sample]:
+        """Samples delivered at ``t`` from the true ``state`` and the IMU ``specific_force`` (a_x, a_y)."""
         p, n = self.params, self.rng.normal
         out: list[Sample] = []
-        if self._due("imu", t, p.imu_rate_hz):
+        if self._due("imu", t):
             e = n(0.0, 1.0, 3)
-            out.append(ImuSample(t, specific_force[0] + p.accel_std * e[0], specific_force[1] + p.accel_std * e[1],
+            out.append(ImuSample(t, float(specific_force[0] + p.accel_std * e[0]),
+                                 float(specific_force[1] + p.accel_std * e[1]),
                                  float(state[GAMMA] + p.gyro_std * e[2])))
-        if self._due("wheel", t, p.wheel_rate_hz):
+        if self._due("wheel", t):
             e = n(0.0, p.wheel_std, 2)
             out.append(WheelSpeedSample(t, float(state[OMEGA_RL] + e[0]), float(state[OMEGA_RR] + e[1])))
-        if self._due("eps", t, p.eps_rate_hz):
+        if self._due("eps", t):
             out.append(EpsSample(t, float(state[DELTA] + n(0.0, p.eps_std))))
-        if self._due("gps", t, p.gps_rate_hz):
-            c, s = np.cos(state[THETA]), np.sin(state[THETA])
+        if self._due("gps", t):
+            c, s = math.cos(state[THETA]), math.sin(state[THETA])
             vX = state[VX] * c - state[VY] * s
             vY = state[VX] * s + state[VY] * c
             self._pending.append(GpsSample(
-                t + p.gps_lag_s, t, state[X] + n(0.0, p.gps_pos_std), state[Y] + n(0.0, p.gps_pos_std),
-                vX + n(0.0, p.gps_vel_std), vY + n(0.0, p.gps_vel_std)))
+                t + p.gps_lag_s, t, float(state[X] + n(0.0, p.gps_pos_std)), float(state[Y] + n(0.0, p.gps_pos_std)),
+                float(vX + n(0.0, p.gps_vel_std)), float(vY + n(0.0, p.gps_vel_std))))
         while self._pending and self._pending[0].t <= t + 1e-9:
             fix = self._pending.popleft()
             out.append(dataclasses.replace(fix, t=t))

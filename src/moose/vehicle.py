@@ -8,19 +8,25 @@ torques).
 * Forces: eq. (eom) with the steering angle kept (the plant does not make the
   small-angle simplification of eq. (eomdyn)); front wheels undriven and
   unbraked (F_xf = 0); static axle loads (Table I gives no CoG height).
-* Lateral tyres: eq. (fy) on the slip angles of eq. (alphas), written with the
-  bounded speed ``v̄ = max(v_x, v_low)`` in the denominators.
+* Lateral tyres: eq. (fy) on the slip angles of eq. (alphas) with β ≈ v_y / v_x,
+  written with the bounded speed ``v̄ = max(v_x, v_low)`` in the denominators:
+  α_f = δ − (v_y + l_f γ) / v̄, α_r = −(v_y − l_r γ) / v̄.
 * Rear tyres: longitudinal magic formula (B_x, C_x) on the slip ratio
   λ = (r ω − v_w) / max(|v_w|, r|ω|, v_low) of each wheel, wheel ground speed
   v_w = v_x ∓ γ b/2, load F_zr / 2 each; wheel dynamics J_ωr ω̇ = T − r F_x;
   the difference of the rear forces adds the yaw moment (F_x,rr − F_x,rl) b/2.
-* Low speed: ``v_low`` bounds every slip denominator.  The wheel-slip ODE has
-  the time constant τ_λ ≈ J_ωr v̄ / (r² μ F_z B_x C_x) ≈ 0.4 ms · v̄ / (1 m/s)
-  at μ = 1, and RK4 is stable for dt < 2.78 τ_λ, so ``v_low = 2 m/s`` keeps the
-  1 kHz integration stable down to standstill; at rest with zero torque every
-  slip and force is zero, so the car stays at rest.
+* Low speed: ``v_low`` bounds every slip denominator.  Linearising the slip
+  dynamics of one rear wheel, d(rω − v_x)/dt = −(rω − v_x)/τ_λ with
+  1/τ_λ = k_x (r²/J_ωr + 2/m) / v̄ and k_x = μ (F_zr/2) B_x C_x
+  (:func:`slip_time_constant`): τ_λ ≈ 0.42 ms per m/s of v̄ at μ = 1.  RK4 is
+  stable for dt < 2.785 τ_λ, so ``v_low = 2 m/s`` keeps the 1 kHz integration
+  stable down to standstill for μ up to ≈ 2.3 (checked when a plant is built);
+  at rest with zero torque every slip and force is zero, so the car stays at rest.
 * Actuators: the steering angle follows the EPS rate command saturated at
-  ±δ̇_max and stops at ±δ_max; motor torques are clipped at ±T_max.
+  ±δ̇_max and stops at ±δ_max; motor torques are clipped at ±T_max.  δ(t) is
+  integrated exactly inside each RK4 step (it is piecewise linear in time:
+  δ(t) = clip(δ₀ + δ̇ t, ±δ_max)), so no RK4 stage sees a steering angle beyond
+  the limit, and δ stops at the limit without overshoot or chattering.
 
 The dynamics are written once as CasADi expressions.  ``step(u, n)`` runs n
 RK4 steps with u held in one call of a function compiled to C (``ccompile``;
@@ -31,23 +37,27 @@ more than the integration itself.
 from __future__ import annotations
 
 import dataclasses
+import math
 from functools import lru_cache
+from typing import Any
 
 import casadi as ca
 import numpy as np
 
 from .ccompile import CompiledFunction, compile_function
-from .params import VehicleParams
+from .params import ParamError, VehicleParams
 from .tire import pacejka
 
 X, Y, THETA, VX, VY, GAMMA, OMEGA_RL, OMEGA_RR, DELTA = range(9)
 """Indices of the plant state vector."""
 N_STATE = 9
 N_INPUT = 3
+RK4_STABILITY = 2.785
+"""RK4's stability limit on the negative real axis, |λ dt| < 2.785."""
 
 
-def dynamics(state: ca.SX, u: ca.SX, p: VehicleParams) -> tuple[ca.SX, ca.SX]:
-    """State derivative and IMU specific force [a_x, a_y] (CasADi expressions)."""
+def dynamics(state: Any, u: Any, p: VehicleParams) -> tuple[Any, Any]:
+    """State derivative and IMU specific force [a_x, a_y] (CasADi expressions), eqs. (trajdef), (eom), (fy)."""
     theta, vx, vy, gamma = state[THETA], state[VX], state[VY], state[GAMMA]
     omega_rl, omega_rr, delta = state[OMEGA_RL], state[OMEGA_RR], state[DELTA]
     rate_cmd = ca.fmin(ca.fmax(u[0], -p.delta_rate_max), p.delta_rate_max)
@@ -73,9 +83,6 @@ def dynamics(state: ca.SX, u: ca.SX, p: VehicleParams) -> tuple[ca.SX, ca.SX]:
     sum_fy = fyf * ca.cos(delta) + fyr
     sum_mz = fyf * ca.cos(delta) * p.lf - fyr * p.lr + (fx_rr - fx_rl) * half
     ax, ay = sum_fx / p.m, sum_fy / p.m
-    # steering stops at ±δ_max
-    rate = ca.if_else(ca.logic_and(delta >= p.delta_max, rate_cmd > 0), 0,
-                      ca.if_else(ca.logic_and(delta <= -p.delta_max, rate_cmd < 0), 0, rate_cmd))
     xdot = ca.vertcat(
         vx * ca.cos(theta) - vy * ca.sin(theta),
         vx * ca.sin(theta) + vy * ca.cos(theta),
@@ -85,9 +92,26 @@ def dynamics(state: ca.SX, u: ca.SX, p: VehicleParams) -> tuple[ca.SX, ca.SX]:
         sum_mz / p.Izz,
         (t_rl - p.r * fx_rl) / p.J_wr,
         (t_rr - p.r * fx_rr) / p.J_wr,
-        rate,
+        steering_rate(delta, rate_cmd, p),
     )
     return xdot, ca.vertcat(ax, ay)
+
+
+def steering_rate(delta: Any, rate: Any, p: VehicleParams) -> Any:
+    """δ̇ of the EPS actuator: the (saturated) rate, zero when it pushes past ±δ_max."""
+    blocked = ca.logic_or(ca.logic_and(delta >= p.delta_max, rate > 0), ca.logic_and(delta <= -p.delta_max, rate < 0))
+    return ca.if_else(blocked, 0, rate)
+
+
+def slip_time_constant(params: VehicleParams, v_bar: float) -> float:
+    """Time constant τ_λ (s) of one rear wheel's slip dynamics at the slip denominator ``v_bar``.
+
+    Near zero slip F_x ≈ k_x (rω − v_x)/v̄ with k_x = μ (F_zr/2) B_x C_x (the slope
+    of eq. (fy)'s magic formula at the origin); J_ωr ω̇ = −r F_x and m v̇_x ≈ 2 F_x
+    (both wheels) give d(rω − v_x)/dt = −k_x (r²/J_ωr + 2/m)/v̄ · (rω − v_x).
+    """
+    k_x = params.mu * 0.5 * params.Fzr * params.Bx * params.Cx
+    return v_bar / (k_x * (params.r**2 / params.J_wr + 2.0 / params.m))
 
 
 PARAM_FIELDS = tuple(f.name for f in dataclasses.fields(VehicleParams))
@@ -118,12 +142,21 @@ def _functions() -> tuple[ca.Function, ca.Function, dict[int, ca.Function | Comp
     pv, p = symbolic_params()
     xdot, force = dynamics(s, u, p)
     f = ca.Function("f", [s, u, pv], [xdot, force])
-    k1 = f(s, u, pv)[0]
-    k2 = f(s + 0.5 * dt * k1, u, pv)[0]
-    k3 = f(s + 0.5 * dt * k2, u, pv)[0]
-    k4 = f(s + dt * k3, u, pv)[0]
+    # the steering angle is piecewise linear in time: exact inside the step
+    rate = ca.fmin(ca.fmax(u[0], -p.delta_rate_max), p.delta_rate_max)
+
+    def delta_at(c: float) -> ca.SX:
+        return ca.fmin(ca.fmax(s[DELTA] + rate * (c * dt), -p.delta_max), p.delta_max)
+
+    def stage(x: ca.SX, c: float) -> ca.SX:
+        return f(ca.vertcat(x[:DELTA], delta_at(c)), u, pv)[0]
+
+    k1 = stage(s, 0.0)
+    k2 = stage(s + 0.5 * dt * k1, 0.5)
+    k3 = stage(s + 0.5 * dt * k2, 0.5)
+    k4 = stage(s + dt * k3, 1.0)
     nxt = s + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-    nxt[DELTA] = ca.fmin(ca.fmax(nxt[DELTA], -p.delta_max), p.delta_max)
+    nxt = ca.vertcat(nxt[:DELTA], delta_at(1.0))
     step = ca.Function("rk4", [s, u, pv, dt], [nxt])
     chunks: dict[int, ca.Function | CompiledFunction] = {}
     for n in (1, CHUNK):
@@ -135,12 +168,25 @@ def _functions() -> tuple[ca.Function, ca.Function, dict[int, ca.Function | Comp
     return f, step, chunks
 
 
+def rk4_step_function() -> ca.Function:
+    """One RK4 step ``rk4(x, u, p, dt) -> x_next`` (CasADi), parametric in ``vehicle_vector(params)``."""
+    return _functions()[1]
+
+
 class VehiclePlant:
     """The plant integrated with fixed-step RK4 (default 1 kHz)."""
 
     def __init__(self, params: VehicleParams, dt: float = 1e-3) -> None:
+        if not (isinstance(dt, (int, float)) and 0.0 < dt < math.inf):
+            raise ParamError(f"dt = {dt!r} is invalid: expected a positive step (s)")
+        tau = slip_time_constant(params, params.v_low)
+        if dt >= RK4_STABILITY * tau:
+            raise ParamError(
+                f"dt = {dt!r} is invalid: RK4 needs dt < {RK4_STABILITY * tau:.3g} s for the wheel-slip time "
+                f"constant {tau:.3g} s at v_low = {params.v_low} m/s, mu = {params.mu} (raise v_low or lower dt)"
+            )
         self.params = params
-        self.dt = dt
+        self.dt = float(dt)
         self._f, _, self._chunks = _functions()
         self._p = vehicle_vector(params)
         self._state = initial_state(params)
@@ -156,19 +202,23 @@ class VehiclePlant:
         return self._t
 
     def reset(self, state: np.ndarray, t: float = 0.0) -> None:
+        """Set the state (and the time); the steering angle must lie within ±δ_max."""
         state = np.asarray(state, dtype=float)
         if state.shape != (N_STATE,) or not np.all(np.isfinite(state)):
             raise ValueError(f"state = {state!r} is invalid: expected {N_STATE} finite values")
+        if abs(state[DELTA]) > self.params.delta_max:
+            raise ValueError(f"state[DELTA] = {state[DELTA]!r} is invalid: expected |delta| <= {self.params.delta_max}")
         self._state = state.copy()
-        self._t = t
+        self._t = float(t)
+        self._force = None
 
     def step(self, u: np.ndarray, n: int = 1) -> np.ndarray:
         """Advance ``n`` steps of ``dt`` with the input ``u`` held; returns the new state."""
         u = np.asarray(u, dtype=float)
         if u.shape != (N_INPUT,) or not np.all(np.isfinite(u)):
             raise ValueError(f"u = {u!r} is invalid: expected {N_INPUT} finite plant inputs")
-        if n < 1:
-            raise ValueError(f"n = {n!r} is invalid: expected at least one step")
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+            raise ValueError(f"n = {n!r} is invalid: expected a positive number of steps")
         state = self._state
         for size in [CHUNK] * (n // CHUNK) + [1] * (n % CHUNK):
             state, force = self._chunks[size](state, u, self._p, self.dt)
