@@ -1,20 +1,28 @@
-"""Weight function: bounds, monotonic factors, failure handling, convex blend, shift."""
+"""Weight function: bounds, monotonic factors, failure handling, convex blend, filter, shift."""
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import pytest
 
-from moose.params import VehicleParams
-from moose.signals import Obstacle, PlanResult, StateEstimate, Threat
+from moose.msf import zoh_rollout
+from moose.params import ParamError, VehicleParams
+from moose.signals import Blend, Obstacle, PlanResult, StateEstimate, Threat
+from moose.tire import peak_slip
 from moose.weight import WeightFunction, WeightParams
 
+VEHICLE = VehicleParams()
 EST = StateEstimate(0.0, 0.0, 0.0, 0.0, 7.0, 0.0, 0.0, 0.0)
-WF = WeightFunction(WeightParams(), VehicleParams())
 
 
-def plan(ay: float, status: str = "converged") -> PlanResult:
-    accel = np.tile([0.0, ay], (10, 1))
-    return PlanResult(accel, status, 5, 1e-3, 1.0, np.zeros((11, 4)))
+def wf(**changes: float) -> WeightFunction:
+    return WeightFunction(WeightParams(**changes), VEHICLE)
+
+
+def plan(ay: float, status: str = "converged", ax: float = 0.0, v: float = 7.0) -> PlanResult:
+    accel = np.tile([ax, ay], (10, 1))
+    return PlanResult(accel, status, 5, 1e-3, 1.0, zoh_rollout(np.array([0.0, 0.0, v, 0.0]), accel, 0.2))
 
 
 def threat(tau: float = 3.0, nu: float = 0.3) -> Threat:
@@ -22,42 +30,86 @@ def threat(tau: float = 3.0, nu: float = 0.3) -> Threat:
 
 
 def test_status_factor() -> None:
-    w = {s: WF.weight(plan(1.0, s), threat(), EST) for s in ("converged", "capped", "failed", "over_budget")}
-    assert w["converged"] > w["capped"] > 0.0 and w["failed"] == w["over_budget"] == 0.0
+    f = wf()
+    w = {s: f.weight(plan(0.5, s), threat(), EST) for s in ("converged", "capped", "failed", "over_budget", "ok")}
+    assert w["converged"] > 0.9 and w["capped"] == pytest.approx(0.7 * w["converged"])
+    assert w["failed"] == w["over_budget"] == w["ok"] == 0.0
+    nan = PlanResult(np.full((10, 2), np.nan), "converged", 3, 1e-3, 1.0, np.zeros((11, 4)))
+    assert f.weight(nan, threat(), EST) == 0.0
 
 
 def test_monotonic_in_steering_demand_tau_and_nu() -> None:
-    demand = [WF.weight(plan(a), threat(), EST) for a in (0.5, 2.0, 3.5, 5.0, 6.0)]
-    assert all(a >= b for a, b in zip(demand, demand[1:])) and demand[0] > 0.9 > 0.1 > demand[-1]
-    taus = [WF.weight(plan(0.5), threat(tau=t), EST) for t in (0.5, 1.4, 2.0, 4.0)]
-    assert all(a <= b for a, b in zip(taus, taus[1:]))
-    nus = [WF.weight(plan(0.5), threat(nu=n), EST) for n in (0.2, 0.5, 0.8, 1.2)]
-    assert all(a >= b for a, b in zip(nus, nus[1:]))
+    f = wf()
+    demand = [f.weight(plan(a), threat(), EST) for a in (0.5, 1.0, 2.0, 3.5, 5.0, 6.0)]
+    assert all(a >= b for a, b in zip(demand, demand[1:])) and demand[0] > 0.9 and demand[-1] < 0.1
+    taus = [f.weight(plan(0.5), threat(tau=t), EST) for t in (0.0, 0.5, 1.4, 1.6, 2.0, 4.0, math.inf)]
+    assert all(a <= b for a, b in zip(taus, taus[1:])) and taus[0] < 0.01 and taus[-1] > 0.9
+    assert taus[3] == pytest.approx(0.5 * taus[-1], rel=1e-3)  # tau_0 = 1.6 s: half
+    nus = [f.weight(plan(0.5), threat(nu=n), EST) for n in (0.0, 0.2, 0.5, 0.7, 0.95, 1.2, math.inf)]
+    assert all(a >= b for a, b in zip(nus, nus[1:])) and nus[0] > 0.9 and nus[-1] == 0.0
+    assert nus[3] == pytest.approx(0.5 * nus[0], rel=0.01)  # nu_0 = 0.7: half
     assert all(0.0 <= w <= 1.0 for w in demand + taus + nus)
 
 
+def test_steering_usage_of_the_first_steps() -> None:
+    f = wf(n_rho=3)
+    # straight ahead: no steering
+    assert f.steering_usage(plan(0.0, ax=2.0), EST) == 0.0
+    # later rows count: a plan that steers hard only in its second step is near the limits too
+    accel = np.zeros((10, 2))
+    accel[1, 1] = 6.0
+    late = PlanResult(accel, "converged", 5, 1e-3, 1.0, zoh_rollout(np.array([0.0, 0.0, 5.0, 0.0]), accel, 0.2))
+    est5 = StateEstimate(0.0, 0.0, 0.0, 0.0, 5.0, 0.0, 0.0, 0.0)
+    # kinematic steering L a / v^2 = 1.7 * 6 / 25 = 0.408 rad: 1.36 delta_max
+    assert f.steering_usage(late, est5) == pytest.approx(1.7 * 6.0 / 25.0 / 0.3)
+    assert wf(n_rho=1).steering_usage(late, est5) == 0.0
+    assert f.weight(late, threat(), est5) < 0.01 < wf(n_rho=1).weight(late, threat(), est5)
+    # row 0 is the FBL's delta* (the paper's delta_MPC): 6 m/s^2 from straight running needs more front
+    # force than mu F_zf, so the tyre inversion saturates at the peak slip angle
+    assert wf(n_rho=1).steering_usage(plan(6.0), EST) == pytest.approx(peak_slip(VEHICLE.By, VEHICLE.Cy) / 0.3)
+
+
 def test_blend_is_convex_and_failure_falls_back_to_msf() -> None:
-    mpc, msf = plan(1.0), plan(3.0)
-    blend = WF.blend(mpc, msf, threat(), EST)
+    f = wf(smoothing=1.0)
+    rng = np.random.default_rng(1)
+    mpc = PlanResult(rng.uniform(-1, 1, (10, 2)), "converged", 5, 1e-3, 1.0, zoh_rollout(np.array([0, 0, 7.0, 0]), np.zeros((10, 2)), 0.2))
+    msf = plan(3.0, "ok")
+    blend = f.blend(mpc, msf, threat(), EST)
+    assert 0.0 < blend.weight_mpc < 1.0
     np.testing.assert_allclose(blend.accel, blend.weight_mpc * mpc.accel + (1 - blend.weight_mpc) * msf.accel)
-    nan_plan = PlanResult(np.full((10, 2), np.nan), "failed", 0, 0.0, np.inf, np.zeros((11, 4)))
-    fallback = WF.blend(nan_plan, msf, threat(), EST)
+    lo, hi = np.minimum(mpc.accel, msf.accel), np.maximum(mpc.accel, msf.accel)
+    assert np.all((blend.accel >= lo - 1e-12) & (blend.accel <= hi + 1e-12))
+    nan_plan = PlanResult(np.full((10, 2), np.nan), "failed", 0, 0.0, math.inf, np.full((11, 4), np.nan))
+    fallback = f.blend(nan_plan, msf, threat(), EST)
     assert fallback.weight_mpc == 0.0
     np.testing.assert_array_equal(fallback.accel, msf.accel)
-    assert WF.blend(mpc, msf, None, EST).weight_mpc == 0.0  # lane keeping is the MSF law
+    assert f.blend(mpc, msf, None, EST).weight_mpc == 0.0  # no threat: lane keeping is the MSF law
+
+
+def test_weight_is_filtered_across_steps_and_drops_at_once_on_failure() -> None:
+    f = wf(smoothing=0.5)
+    msf = plan(3.0, "ok")
+    raw = f.weight(plan(0.5), threat(), EST)
+    w1 = f.blend(plan(0.5), msf, threat(), EST).weight_mpc
+    assert w1 == pytest.approx(raw)  # the first blend has no history
+    assert f.blend(plan(0.5, "failed"), msf, threat(), EST).weight_mpc == 0.0
+    w3 = f.blend(plan(0.5), msf, threat(), EST).weight_mpc
+    w4 = f.blend(plan(0.5), msf, threat(), EST).weight_mpc
+    assert w3 == pytest.approx(0.5 * raw) and w4 == pytest.approx(0.75 * raw)
+    f.reset()
+    assert f.blend(plan(0.5), msf, threat(), EST).weight_mpc == pytest.approx(raw)
 
 
 def test_next_initial_guess_shifts_by_one_step() -> None:
-    blend = WF.blend(plan(1.0), plan(3.0), threat(), EST)
-    accel = blend.accel.copy()
-    accel[:, 0] = np.arange(10)
-    from moose.signals import Blend
-    guess = WF.next_initial_guess(Blend(0.5, accel))
+    accel = np.column_stack([np.arange(10.0), -np.arange(10.0)])
+    guess = WeightFunction.next_initial_guess(Blend(0.5, accel))
     assert guess[:, 0].tolist() == [1, 2, 3, 4, 5, 6, 7, 8, 9, 9]
+    assert guess[:, 1].tolist() == [-1, -2, -3, -4, -5, -6, -7, -8, -9, -9]
+    assert guess.shape == accel.shape
 
 
-@pytest.mark.parametrize("field", ["rho_0", "tau_slope"])
-def test_bad_parameters_name_the_field(field: str) -> None:
-    from moose.params import ParamError
+@pytest.mark.parametrize("field, value", [("rho_0", -1.0), ("tau_slope", 0.0), ("capped_factor", 1.5),
+                                          ("smoothing", 0.0), ("n_rho", 0)])
+def test_bad_parameters_name_the_field(field: str, value: float) -> None:
     with pytest.raises(ParamError, match=field):
-        WeightParams(**{field: -1.0})
+        WeightParams(**{field: value})

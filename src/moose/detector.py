@@ -1,19 +1,30 @@
-"""Obstacle detector (Sec. III): from visible danger zones and the state estimate to τ, w and ν.
+"""Obstacle detector (Sec. III): from the visible danger zones and the state estimate to τ, w and ν.
 
-* τ = (x_min − x̂) / v̂_x: time to reach the obstacle's near edge, eq. (nudef)'s τ.
-* Evasion side: the side needing the smaller lateral displacement from the ego
-  path; near-ties (within ``side_tie``, so estimation noise cannot flip it) go
-  to the left (+1) as in all the paper's tests; latched with the
-  ego path ŷ at first detection so w does not shrink as the car moves aside.
-* w: lateral distance from the ego path to the obstacle's far edge on the
-  evasion side (the ν values printed in Figs. 5–7 use exactly this width).
-* ν = w / y_max(τ, v̂_x), eq. (nudef).
-The threat is reported until the CoG has passed the far end x_max by
-``pass_margin``; then ``None`` and the planners return to the lane.
+For the nearest danger zone ahead that lies in the ego path:
+
+* τ = (x_min − x̂) / v̂_x: time to reach the zone's near edge at the current
+  speed (the τ of eq. (nudef)); it turns negative once the CoG is beside the
+  zone and the threat is still reported then, until the CoG has passed the far
+  end x_max by ``pass_margin`` (the planners then return to the lane).
+* Ego path: the lateral position ŷ at first detection, latched per obstacle
+  together with the evasion side, so w does not shrink as the car moves aside.
+* Evasion side: the side needing the smaller lateral displacement from the
+  ego path (y_max − ŷ to the left, ŷ − y_min to the right); displacements that
+  differ by less than ``side_tie`` count as a tie and go left (+1), as in all
+  the paper's tests, so estimation noise cannot flip the decision.
+* w: lateral distance from the ego path to the zone's far edge on the evasion
+  side (the ν printed in Figs. 5–7 use exactly this width), never negative.
+* ν = w / y_max(τ, v̂_x), eq. (nudef); 0 when the car is not closing in (τ = ∞).
+
+A zone is in the ego path when ŷ lies within ``lateral_margin`` of its lateral
+extent (the zone is what the CoG must avoid, so the margin defaults to 0), and
+within ``range_m`` ahead.  Zones that are not reported by the perception
+sensor any more are dropped.
 """
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Optional, Sequence
 
 from .maneuver import MaxSteeringTable, lateral_steering_index, time_to_collision
@@ -26,41 +37,68 @@ class DetectorParams:
     """Detector parameters."""
 
     pass_margin: float = 2.0
-    """Distance past the obstacle's far end after which the threat is cleared (m)."""
+    """Distance past the zone's far end x_max after which the threat is cleared (m)."""
     range_m: float = 80.0
     """Perception range ahead of the CoG (m)."""
     side_tie: float = 0.25
     """Displacements to either side closer than this count as a tie: evade left (m)."""
+    lateral_margin: float = 0.0
+    """A zone whose lateral extent is within this distance of the ego path is in the path (m)."""
 
     def __post_init__(self) -> None:
         check("pass_margin", self.pass_margin, non_negative, "a non-negative distance (m)")
         check("range_m", self.range_m, positive, "a positive distance (m)")
         check("side_tie", self.side_tie, non_negative, "a non-negative distance (m)")
+        check("lateral_margin", self.lateral_margin, non_negative, "a non-negative distance (m)")
+
+
+def evasion_side(obstacle: Obstacle, y_path: float, side_tie: float) -> int:
+    """+1 (left) when the displacement to the left edge is not larger than to the right one by ``side_tie`` or more."""
+    up = obstacle.y_max - y_path
+    down = y_path - obstacle.y_min
+    return 1 if up <= down + side_tie else -1
+
+
+def danger_zone_width(obstacle: Obstacle, y_path: float, side: int) -> float:
+    """w: lateral distance from the ego path to the far edge on the evasion side (m), at least 0."""
+    w = obstacle.y_max - y_path if side > 0 else y_path - obstacle.y_min
+    return max(w, 0.0)
 
 
 class ObstacleDetector:
-    """Tracks the nearest relevant danger zone and reports its threat measures."""
+    """Tracks the nearest danger zone in the ego path and reports its threat measures."""
 
     def __init__(self, params: DetectorParams, table: MaxSteeringTable) -> None:
         self.params = params
         self.table = table
         self._latched: dict[Obstacle, tuple[int, float]] = {}
+        """Per obstacle: (side, y_path) at first detection."""
 
     def reset(self) -> None:
         self._latched.clear()
 
+    def _relevant(self, obstacle: Obstacle, estimate: StateEstimate) -> bool:
+        p = self.params
+        if obstacle.x_max + p.pass_margin < estimate.x or obstacle.x_min - estimate.x > p.range_m:
+            return False
+        if obstacle in self._latched:
+            return True
+        return obstacle.y_min - p.lateral_margin <= estimate.y <= obstacle.y_max + p.lateral_margin
+
     def update(self, t: float, estimate: StateEstimate, obstacles: Sequence[Obstacle]) -> Optional[Threat]:
-        relevant = [o for o in obstacles
-                    if o.x_max + self.params.pass_margin >= estimate.x and o.x_min - estimate.x <= self.params.range_m]
+        """The threat of the nearest relevant visible zone at time ``t``, or None."""
+        visible = set(obstacles)
+        for gone in [o for o in self._latched if o not in visible or o.x_max + self.params.pass_margin < estimate.x]:
+            del self._latched[gone]
+        relevant = [o for o in obstacles if self._relevant(o, estimate)]
         if not relevant:
             return None
         obstacle = min(relevant, key=lambda o: o.x_min)
         if obstacle not in self._latched:
-            up = obstacle.y_max - estimate.y
-            down = estimate.y - obstacle.y_min
-            self._latched[obstacle] = (1, estimate.y) if up <= down + self.params.side_tie else (-1, estimate.y)
+            self._latched[obstacle] = (evasion_side(obstacle, estimate.y, self.params.side_tie), estimate.y)
         side, y_path = self._latched[obstacle]
-        w = obstacle.y_max - y_path if side > 0 else y_path - obstacle.y_min
+        w = danger_zone_width(obstacle, y_path, side)
         tau = time_to_collision(obstacle.x_min - estimate.x, estimate.vx)
-        nu = lateral_steering_index(w, tau, estimate.vx, self.table)
+        # not closing in (τ = ∞): no steering is needed, ν = 0
+        nu = 0.0 if tau == math.inf else lateral_steering_index(w, tau, estimate.vx, self.table)
         return Threat(t=t, obstacle=obstacle, tau=tau, w=w, nu=nu, side=side, y_path=y_path)

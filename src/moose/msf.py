@@ -2,24 +2,34 @@
 
 On detection a driver steers to the side as fast as possible.  The MSF
 planner follows the maximum steering maneuver y_max of eq. (ymax), scaled so
-that the lateral offset reaches the danger-zone width w (plus a margin) when
-the car reaches the obstacle:
+that the lateral offset reaches the danger-zone width w plus a margin m a
+little before the car reaches the obstacle, and then holds that offset:
 
     ỹ_ref(t) = min(κ y_max(t − t_0, v_x), w + m),   κ = min(1, (w + m) / y_max(f τ, v_x)),
 
-i.e. κ = ν (1 + m/w) y_max(τ)/y_max(fτ) — the maneuver scaled by the lateral
-steering index, arriving a little early (f = ``reach_fraction``), with t_0 the
-detection time, τ the time to collision at detection and ỹ
-the lateral offset from the ego path toward the evasion side.  The feed-forward
-is the maneuver's mean acceleration over the coming planning step,
-(ẏ_ref(τ + t_s) − ẏ_ref(τ)) / t_s, which a zero-order hold reproduces exactly.  When ν ≥ 1 the
-full maneuver is the best steering can do.  The reference is tracked over the
-horizon by a critically damped lateral law, a_Y = ÿ_ref + k_v (ẏ_ref − ṽ_Y) +
-k_p (ỹ_ref − ỹ), rolled out on the kinematic model eq. (skin) so the result is
-a whole input sequence (blendable, and usable as the MPC's initial guess).
-Once the threat is cleared (past the obstacle) or absent, the same law with
-softer gains returns the car to its lane.  Longitudinally the maneuver is
-"without braking": the speed tracks v_des with a first-order law.
+where ỹ = side·(y − y_path) is the lateral offset toward the evasion side, t_0
+the first planning instant after detection and τ, v_x those of that instant
+(κ, t_0 and v_x are latched per obstacle; past the peak of y_max, half a turn,
+after 4.8 s at the earliest with μ = 0.3, the reference holds the peak).
+Because y_max(f τ) ≤ y_max(τ), κ ≥ ν (eq. (nudef)): the reference is never
+below the maneuver scaled by the lateral steering index, ν·y_max, which
+reaches w exactly at the near edge; for ν ≳ f² (the early part of y_max is
+about quadratic) κ = 1, the full maneuver.
+
+Each planning instant re-plans from the current estimate: the reference is
+tracked over the horizon by a critically damped lateral law
+
+    a_Y = ÿ_ref + 2ω (ẏ_ref − ṽ_Y) + ω² (ỹ_ref − ỹ),
+
+rolled out on the kinematic model eq. (skin) with exact zero-order hold, so
+the output is a whole input sequence (blendable, and usable as the MPC's
+initial guess).  The feed-forward ÿ_ref is the maneuver's mean acceleration
+over each step, (ẏ_ref(s + t_s) − ẏ_ref(s)) / t_s, which a zero-order hold
+reproduces exactly.  Once the detector clears the threat (the CoG is past the
+obstacle) or without a threat, the same law with ω_return and zero reference
+returns the car to the lane y_lane.  Longitudinally the maneuver is "without
+braking": v̇_X = k_v (v_des − v_X).  Both accelerations are clipped to
+±a_x_max, ±a_y_max (the MPC's input bounds).
 """
 from __future__ import annotations
 
@@ -30,7 +40,6 @@ from typing import Optional
 import numpy as np
 
 from .maneuver import MaxSteeringTable
-from .mpc import kinematic_rollout
 from .params import VehicleParams, check, non_negative, positive
 from .signals import Obstacle, PlannerInput, PlanResult
 
@@ -40,78 +49,127 @@ class MsfParams:
     """MSF planner parameters."""
 
     N_p: int = 10
+    """Prediction horizon (steps), the MPC's."""
     t_s: float = 0.2
+    """Planning sampling time (s), Table I."""
     a_x_max: float = 6.0
+    """Bound of the longitudinal acceleration (m/s²), the MPC's input bound."""
     a_y_max: float = 6.0
+    """Bound of the lateral acceleration (m/s²), the MPC's input bound."""
     margin: float = 0.5
-    """Lateral margin beyond the far edge (m)."""
+    """Lateral margin m beyond the far edge (m)."""
     omega_evade: float = 2.5
     """Natural frequency of the lateral tracking law while evading (rad/s)."""
     omega_return: float = 1.0
     """Natural frequency of the lane return (rad/s)."""
     k_speed: float = 0.5
-    """Speed-tracking gain (1/s)."""
+    """Speed-tracking gain k_v (1/s)."""
     reach_fraction: float = 0.6
-    """The scaled maneuver reaches w + margin after this fraction of τ (early, like a driver)."""
+    """f: the scaled maneuver reaches w + margin after this fraction of τ (early, like a driver)."""
 
     def __post_init__(self) -> None:
-        check("N_p", self.N_p, lambda v: 1 <= v <= 100, "an integer in [1, 100]")
+        check("N_p", self.N_p, lambda v: isinstance(v, int) and 1 <= v <= 100, "an integer in [1, 100]")
         for name in ("t_s", "a_x_max", "a_y_max", "omega_evade", "omega_return", "k_speed"):
             check(name, getattr(self, name), positive, "a positive number")
         check("margin", self.margin, non_negative, "a non-negative distance (m)")
         check("reach_fraction", self.reach_fraction, lambda v: 0.0 < v <= 1.0, "a fraction in (0, 1]")
 
 
+def zoh_rollout(state: np.ndarray, accel: np.ndarray, t_s: float) -> np.ndarray:
+    """eq. (skin) with exact zero-order hold: (N + 1, 4) states [x, y, v_X, v_Y] from (N, 2) accelerations.
+
+    p⁺ = p + t_s v + t_s²/2 a,  v⁺ = v + t_s a (exact for a double integrator).
+    """
+    state = np.asarray(state, dtype=float)
+    accel = np.asarray(accel, dtype=float).reshape(-1, 2)
+    out = np.empty((len(accel) + 1, 4))
+    out[0] = state
+    out[1:, 2:] = state[2:] + t_s * np.cumsum(accel, axis=0)
+    out[1:, :2] = state[:2] + np.cumsum(t_s * out[:-1, 2:] + 0.5 * t_s**2 * accel, axis=0)
+    return out
+
+
+@dataclasses.dataclass(frozen=True)
+class _Evasion:
+    """The latched plan for one obstacle."""
+
+    obstacle: Obstacle
+    t0: float
+    kappa: float
+    vx: float
+    """Speed the maneuver profile is evaluated at (m/s): the speed at detection."""
+    s_peak: float
+    """Time at which y_max(·, vx) peaks within the table (s): past half a turn it falls, the reference holds."""
+
+
 class MsfPlanner:
-    """Maximum steering feed-forward; remembers each obstacle's detection time and ν."""
+    """Maximum steering feed-forward; remembers the current obstacle's detection time and scale κ."""
 
     def __init__(self, params: MsfParams, table: MaxSteeringTable, vehicle: VehicleParams) -> None:
         self.params = params
         self.table = table
         self.vehicle = vehicle
-        self._detections: dict[Obstacle, tuple[float, float]] = {}
+        self._evasion: Optional[_Evasion] = None
 
-    def _lateral(self, t: float, offset: float, v_lat: float, vx: float, evade: Optional[tuple[float, float, float]]) -> float:
+    def reset(self) -> None:
+        self._evasion = None
+
+    def scale(self, w: float, tau: float, vx: float) -> float:
+        """κ = min(1, (w + m) / y_max(f τ, v_x)): the share of the maximum steering maneuver needed."""
         p = self.params
-        if evade is None:
-            k_p, k_v = p.omega_return**2, 2.0 * p.omega_return
-            return -k_p * offset - k_v * v_lat
-        t0, kappa, target = evade
-        ts = p.t_s
-        tau = max(t - t0, 0.0)
-        y_ref = kappa * self.table.y_max(tau, vx)
+        reach = self.table.y_max(p.reach_fraction * max(tau, 0.0), max(vx, 0.0))
+        return min(1.0, (w + p.margin) / reach) if reach > 1e-9 else 1.0
+
+    def _reference(self, s: float, evasion: _Evasion, target: float) -> tuple[float, float, float]:
+        """(ỹ_ref, ẏ_ref, mean ÿ_ref over the coming step) at ``s`` seconds after t_0."""
+        table, k, v = self.table, evasion.kappa, evasion.vx
+        if s >= evasion.s_peak:
+            return min(k * table.y_max(evasion.s_peak, v), target), 0.0, 0.0
+        y_ref = k * table.y_max(s, v)
         if y_ref >= target:
-            y_ref, v_ref, a_ref = target, 0.0, 0.0
-        else:
-            # mean acceleration of the maneuver over the coming step (exact for a zero-order hold)
-            v_ref = kappa * self.table.v_Y_max(tau, vx)
-            a_ref = (kappa * self.table.v_Y_max(tau + ts, vx) - v_ref) / ts
-        k_p, k_v = p.omega_evade**2, 2.0 * p.omega_evade
-        return a_ref + k_v * (v_ref - v_lat) + k_p * (y_ref - offset)
+            return target, 0.0, 0.0
+        v_ref = k * table.v_Y_max(s, v)
+        a_ref = (k * table.v_Y_max(s + self.params.t_s, v) - v_ref) / self.params.t_s
+        return y_ref, v_ref, a_ref
 
     def plan(self, inp: PlannerInput) -> PlanResult:
+        """Accelerations over the horizon: evasion when ``inp.threat`` is set ("ok"), else lane keeping ("idle")."""
         start = time.perf_counter()
         p, est, threat = self.params, inp.estimate, inp.threat
         if threat is not None:
-            if threat.obstacle not in self._detections:
-                reach = self.table.y_max(p.reach_fraction * max(threat.tau, 0.0), max(est.vx, 0.0))
-                target = threat.w + p.margin
-                self._detections[threat.obstacle] = (inp.t, min(1.0, target / reach) if reach > 1e-9 else 1.0)
-            t0, kappa = self._detections[threat.obstacle]
-            evade: Optional[tuple[float, float, float]] = (t0, kappa, threat.w + p.margin)
-            side, y_path = float(threat.side), threat.y_path
+            if self._evasion is None or self._evasion.obstacle != threat.obstacle:
+                vx = max(est.vx, 0.0)
+                profile = np.asarray(self.table.y_max(self.table.t, vx))
+                s_peak = float(self.table.t[int(np.argmax(profile))])
+                self._evasion = _Evasion(threat.obstacle, inp.t, self.scale(threat.w, threat.tau, vx), vx, s_peak)
+            evasion: Optional[_Evasion] = self._evasion
+            side, y_path, target = float(threat.side), threat.y_path, threat.w + p.margin
         else:
-            evade, side, y_path = None, 1.0, inp.y_lane
-        state = np.array([est.x, est.y, est.vX, est.vY])
+            self._evasion = evasion = None
+            side, y_path, target = 1.0, inp.y_lane, 0.0
+        if evasion is not None:
+            k_p, k_v = p.omega_evade**2, 2.0 * p.omega_evade
+        else:
+            k_p, k_v = p.omega_return**2, 2.0 * p.omega_return
+        state = np.array([est.x, est.y, est.vX, est.vY], dtype=float)
         accel = np.zeros((p.N_p, 2))
-        s = state.copy()
+        ts = p.t_s
+        y, vX, vY = float(est.y), float(state[2]), float(state[3])
         for k in range(p.N_p):
-            t = inp.t + k * p.t_s
-            a_lat = side * self._lateral(t, side * (s[1] - y_path), side * s[3], max(s[2], 0.0), evade)
-            a_lon = p.k_speed * (inp.v_des - s[2])
-            accel[k] = (np.clip(a_lon, -p.a_x_max, p.a_x_max), np.clip(a_lat, -p.a_y_max, p.a_y_max))
-            s = kinematic_rollout(s, accel[k:k + 1], p.t_s)[1]
-        predicted = kinematic_rollout(state, accel, p.t_s)
-        status = "ok" if threat is not None else "idle"
-        return PlanResult(accel=accel, status=status, iterations=0, solve_time_s=time.perf_counter() - start,
-                          cost=0.0, predicted=predicted)
+            offset, v_lat = side * (y - y_path), side * vY
+            if evasion is not None:
+                y_ref, v_ref, a_ref = self._reference(inp.t + k * ts - evasion.t0, evasion, target)
+            else:
+                y_ref = v_ref = a_ref = 0.0
+            a_lat = side * (a_ref + k_v * (v_ref - v_lat) + k_p * (y_ref - offset))
+            a_lon = p.k_speed * (inp.v_des - vX)
+            a_lon = min(max(a_lon, -p.a_x_max), p.a_x_max)
+            a_lat = min(max(a_lat, -p.a_y_max), p.a_y_max)
+            accel[k, 0], accel[k, 1] = a_lon, a_lat
+            # eq. (skin), exact zero-order hold (lateral part; x does not enter the law)
+            y += ts * vY + 0.5 * ts * ts * a_lat
+            vX += ts * a_lon
+            vY += ts * a_lat
+        predicted = zoh_rollout(state, accel, ts)
+        return PlanResult(accel=accel, status="ok" if evasion is not None else "idle", iterations=0,
+                          solve_time_s=time.perf_counter() - start, cost=0.0, predicted=predicted)
