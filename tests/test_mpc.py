@@ -1,4 +1,5 @@
-"""MPC planner: barrier sign, Example 2 of the paper, statuses, safety of the solution, mirror symmetry."""
+"""MPC planner: cost terms against their formulas, Example emp:eta, receding-horizon behaviour,
+statuses, v_X ≥ 0 and mirror symmetry."""
 from __future__ import annotations
 
 import dataclasses
@@ -6,96 +7,322 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from moose.mpc import MpcParams, MpcPlanner, SolverCaps, j_safe, kinematic_rollout, y_safe
-from moose.params import ParamError, VehicleParams
+from moose.mpc import (
+    PAPER_CAPS, MpcParams, MpcPlanner, SolverCaps, epsilon, j_brake, j_safe, j_stable, j_steer,
+    kinematic_rollout, past_obstacle, y_safe,
+)
+from moose.params import G, ParamError, VehicleParams
 from moose.signals import Obstacle, PlannerInput, StateEstimate, Threat
 
 VEHICLE = VehicleParams()
+DEFAULT = MpcParams()
+EQUAL = (0.25, 0.25, 0.25, 0.25)
 
 
-def threat(w: float = 2.6, x_min: float = 10.0, side: int = 1, length: float = 2.0) -> Threat:
-    y_lo, y_hi = (w - 2 * w, w) if side > 0 else (-w, w)
-    return Threat(0.0, Obstacle(x_min, x_min + length, y_lo, y_hi), x_min / 7.0, w, 1.0, side, 0.0)
+def threat(w: float = 2.6, x_min: float = 10.0, side: int = 1, length: float = 2.0, y_path: float = 0.0) -> Threat:
+    """A danger zone straddling the path whose far edge on the evasion side is w away."""
+    y_lo, y_hi = (y_path - 0.5, y_path + w) if side > 0 else (y_path - w, y_path + 0.5)
+    return Threat(0.0, Obstacle(x_min, x_min + length, y_lo, y_hi), x_min / 7.0, w, 1.0, side, y_path)
 
 
-def straight(v: float = 7.0, x: float = 0.0, y: float = 0.0) -> StateEstimate:
-    return StateEstimate(0.0, x, y, 0.0, v, 0.0, 0.0, 0.0)
+def state(v: float = 7.0, x: float = 0.0, y: float = 0.0, vy: float = 0.0) -> StateEstimate:
+    return StateEstimate(0.0, x, y, 0.0, v, vy, 0.0, 0.0)  # θ = 0: body = global velocities
 
 
-def test_barrier_keeps_the_ego_above_the_sigmoid() -> None:
-    ys = float(y_safe(0.0, 7.0, 10.0, 2.6, 0.3))
-    assert ys == pytest.approx(2.6, rel=0.01)  # at tau = 1.4 s the barrier is already up
-    # cost falls as the ego moves to the safe side, and is finite (quadratic) on the wrong side
-    costs = [float(j_safe(y, ys, 0.1)) for y in (-1.0, 0.0, 1.0, 2.0, 3.0, 4.0)]
-    assert all(a > b for a, b in zip(costs, costs[1:]))
-    assert all(math.isfinite(c) for c in costs)
-    # far from the obstacle the barrier is down: y_safe(x_obs - 4 v_X) = w / 2
-    assert float(y_safe(10.0 - 28.0, 7.0, 10.0, 2.6, 0.3)) == pytest.approx(1.3)
+def receding_horizon(params: MpcParams, th: Threat | None, s0: list[float], v_des: float, steps: int,
+                     clear_after: float = 2.0) -> tuple[np.ndarray, list]:
+    """Closed loop on the kinematic model: the first input applied, the rest shifted as the next guess."""
+    planner = MpcPlanner(params, VEHICLE)
+    s = np.array(s0, dtype=float)
+    guess = None
+    traj, results = [s.copy()], []
+    for k in range(steps):
+        active = th if th is not None and s[0] < th.obstacle.x_max + clear_after else None
+        result = planner.plan(PlannerInput(k * params.t_s, state(s[2], s[0], s[1], s[3]), active, v_des, guess))
+        s = kinematic_rollout(s, result.accel[:1], params.t_s)[1]
+        traj.append(s.copy())
+        results.append(result)
+        guess = np.vstack([result.accel[1:], result.accel[-1:]])
+    return np.array(traj), results
 
 
-def test_notes_problem_evades_to_the_safe_side_and_clears() -> None:
-    planner = MpcPlanner(MpcParams(), VEHICLE)
-    result = planner.plan(PlannerInput(0.0, straight(), threat(), 7.0, None))
+# --- cost terms --------------------------------------------------------------------------------
+
+def test_y_safe_is_the_sigmoid_of_eq_ysafe() -> None:
+    eps = epsilon(0.3)
+    assert eps == pytest.approx(1.0 / math.sqrt(8.8 * 0.3 * G))
+    w, x_obs = 2.0, 30.0
+    for x, v in ((0.0, 5.0), (8.0, 5.0), (12.0, 6.0), (20.0, 3.0)):
+        reference = w / (1.0 + math.exp((x_obs - x - 4 * v) / (eps * math.sqrt(w * v * v))))
+        assert y_safe(x, v, x_obs, w, eps, v_reg=1e-9) == pytest.approx(reference, rel=1e-9)
+    # half of w exactly 4 v_X before the obstacle (Fig. barrier), whatever the regularisation
+    assert y_safe(x_obs - 4 * 5.0, 5.0, x_obs, w, eps) == pytest.approx(w / 2)
+    # the tanh form does not overflow where exp would
+    assert y_safe(-1e6, 5.0, x_obs, w, eps) == 0.0
+    assert y_safe(1e6, 5.0, x_obs, w, eps) == pytest.approx(w)
+    assert math.isfinite(y_safe(0.0, 0.0, x_obs, w, eps))  # v_X = 0 is regular
+
+
+def test_paper_barrier_is_minus_log_continued_below_the_margin() -> None:
+    m = 0.3
+    d = np.linspace(-5.0, 10.0, 3001)
+    j = np.array([j_safe(v, 0.0, m) for v in d])
+    assert np.all(np.isfinite(j)) and np.all(np.diff(j) < 0.0)  # rewards every metre of distance
+    np.testing.assert_allclose(j[d >= m], -np.log(d[d >= m]), rtol=1e-12)
+    dm = -2.0 - m
+    assert j_safe(-2.0, 0.0, m) == pytest.approx(-math.log(m) - dm / m + dm**2 / (2 * m * m))
+    assert j_safe(2.5, 2.0, m) < j_safe(1.5, 2.0, m)  # the sign: above y_safe is cheaper
+
+
+def test_clipped_barrier_repels_from_y_safe_and_does_not_reward_beyond_the_clearance() -> None:
+    m, c = 0.3, 1.0
+    d = np.linspace(-5.0, 3.0, 8001)
+    j = np.array([j_safe(v, 0.0, m, c) for v in d])
+    assert np.all(np.isfinite(j))
+    assert np.all(np.diff(j[d <= c]) < 0.0)  # pushes toward the safe side everywhere below c
+    assert np.all(j[d >= c] == 0.0)
+    inner = (d >= m) & (d < c)
+    np.testing.assert_allclose(j[inner], -np.log(d[inner] / c) + d[inner] / c - 1.0, rtol=1e-12)
+    second = np.diff(j, 2)
+    assert np.all(second > -1e-9)  # convex
+    slope = np.diff(j) / np.diff(d)
+    h = d[1] - d[0]
+    assert np.max(np.abs(np.diff(slope))) <= 1.01 * h / m**2  # C¹: slope changes only through curvature ≤ 1/m²
+    # below the margin: the second-order Taylor polynomial of the log branch
+    dm = -2.0 - m
+    assert j_safe(-2.0, 0.0, m, c) == pytest.approx(-math.log(m) + m - 1 + (1 - 1 / m) * dm + dm**2 / (2 * m * m))
+    # the sign: the ego above y_safe is cheaper than below it
+    assert j_safe(2.5, 2.0, m, c) < j_safe(1.5, 2.0, m, c)
+
+
+def test_absolute_values_are_smooth_approximations() -> None:
+    for x in (-3.0, -0.4, 0.0, 0.7, 5.0):
+        assert j_steer(x) == pytest.approx(abs(x), abs=0.05)
+        assert j_brake(7.0 + x, 7.0) == pytest.approx(abs(x), abs=0.05)
+    assert j_steer(0.0) == 0.0
+    assert j_stable(7.0, 1.4) == pytest.approx(0.2, abs=0.01)
+    assert math.isfinite(j_stable(0.0, 1.0))  # |v_Y / v_X| regularised at v_X = 0
+    assert past_obstacle(0.0, 12.0) < 1e-6 and past_obstacle(12.0, 12.0) < 0.02
+    assert past_obstacle(13.0, 12.0) == pytest.approx(0.5) and past_obstacle(16.0, 12.0) > 0.99
+
+
+def test_exact_hold_prediction() -> None:
+    a = np.array([[1.5, -2.0]] * 5)
+    pred = kinematic_rollout(np.array([1.0, 2.0, 7.0, 0.5]), a, 0.2)
+    t = 0.2 * np.arange(6)
+    np.testing.assert_allclose(pred[:, 0], 1.0 + 7.0 * t + 0.75 * t**2, atol=1e-12)
+    np.testing.assert_allclose(pred[:, 1], 2.0 + 0.5 * t - 1.0 * t**2, atol=1e-12)
+    np.testing.assert_allclose(pred[:, 2:], [[7.0 + 1.5 * s, 0.5 - 2.0 * s] for s in t], atol=1e-12)
+    assert pred[1, 1] != pred[0, 1] + 0.2 * 0.5  # unlike Euler, the first input moves y(k+1)
+
+
+def reference_cost(params: MpcParams, s0: np.ndarray, u: np.ndarray, th: Threat, v_des: float) -> float:
+    """𝒥 of eq. (jcaldef) written out from the paper's formulas (NumPy, for one threat)."""
+    p = params
+    eps = 1.0 / math.sqrt(8.8 * p.mu * G)
+    e1, e2, e3, e4 = p.eta
+    total = 0.0
+    x, y, vx, vy = s0
+    for ux, uy in u:
+        ax, ay = ux * p.a_x_max, uy * p.a_y_max
+        x, y = x + p.t_s * vx + 0.5 * p.t_s**2 * ax, y + p.t_s * vy + 0.5 * p.t_s**2 * ay
+        vx, vy = vx + p.t_s * ax, vy + p.t_s * ay
+        yt = th.side * (y - th.y_path)
+        ys = th.w / (1 + math.exp((th.obstacle.x_min - x - 4 * vx) / (eps * math.sqrt(th.w * (vx**2 + p.v_reg**2)))))
+        d, m, c = yt - ys, p.barrier_margin, p.barrier_clearance
+        if p.barrier == "paper":  # −log d, its Taylor polynomial at m below m
+            barrier = -math.log(d) if d >= m else -math.log(m) - (d - m) / m + (d - m) ** 2 / (2 * m * m)
+        elif d >= c:
+            barrier = 0.0
+        elif d >= m:
+            barrier = -math.log(d / c) + d / c - 1
+        else:
+            barrier = -math.log(m / c) + m / c - 1 + (1 / c - 1 / m) * (d - m) + (d - m) ** 2 / (2 * m * m)
+        fall = 1.0 - 1.0 / (1.0 + math.exp(-(x - th.obstacle.x_max - p.pass_margin) / (p.pass_margin / 4)))
+        sabs = lambda z: math.sqrt(z * z + p.abs_eps**2) - p.abs_eps  # noqa: E731
+        total += e1 * fall * barrier + e2 * sabs(vy) / math.sqrt(vx**2 + p.v_reg**2) + e3 * sabs(vx - v_des)
+        total += e4 * sabs(uy) + p.eta_return * sabs(yt) + p.reverse_penalty * min(vx, 0.0) ** 2
+    return total
+
+
+CLIPPED = MpcParams(barrier="clipped")
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.floats(-1.0, 1.0), min_size=20, max_size=20), st.sampled_from([1, -1]),
+       st.floats(0.5, 9.0), st.floats(-1.0, 1.0), st.sampled_from([DEFAULT, CLIPPED]))
+def test_cost_is_eq_jcaldef_over_the_predicted_states(u: list[float], side: int, v: float, y: float,
+                                                      params: MpcParams) -> None:
+    planner = MpcPlanner(params, VEHICLE)
+    th = threat(w=2.2, x_min=12.0, side=side, y_path=0.3)
+    uu = np.array(u).reshape(10, 2)
+    s0 = np.array([1.0, y, v, 0.4])
+    inp = PlannerInput(0.0, state(v, 1.0, y, 0.4), th, 6.0, None)
+    assert planner.cost(inp, uu) == pytest.approx(reference_cost(params, s0, uu, th, 6.0), rel=1e-9, abs=1e-9)
+
+
+# --- Example emp:eta ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize("eta", [EQUAL, (0.5, 0.25, 0.05, 0.2)])
+def test_example_eta_steers_at_the_bound_without_braking(eta: tuple[float, float, float, float]) -> None:
+    """N_p = 2, u(k) = u(k+1), v_X = v_des = 5, x = y = y_obs = 0, x_obs = w = 1 (2 m long zone).
+
+    The paper prints [0.00, 0.53] (equal weights) and [−0.35, 1.00].  With the barrier
+    keeping the ego above y_safe, y_safe is ≈ w at both predicted steps whatever the
+    braking (x_obs − x − 4 v_X ≪ 0), no input reaches it, and both sets steer at the bound;
+    braking cannot lower the barrier, so J_brake and J_stable keep the speed.
+    """
+    planner = MpcPlanner(MpcParams(N_p=2, eta=eta), VEHICLE)
+    inp = PlannerInput(0.0, state(5.0), threat(w=1.0, x_min=1.0), 5.0, None)
+    grid = np.linspace(-1.0, 1.0, 81)
+    costs = np.array([[planner.cost(inp, [[a, b], [a, b]]) for b in grid] for a in grid])
+    i, j = np.unravel_index(np.argmin(costs), costs.shape)
+    assert grid[j] == 1.0 and abs(grid[i]) <= 0.05  # held input: full steering, no braking
+    result = planner.plan(inp)  # the solver on the free two-step problem agrees
     assert result.status in ("converged", "capped")
-    assert np.all(np.isfinite(result.accel)) and math.isfinite(result.cost)
-    assert np.all(np.abs(result.accel) <= 6.0 + 1e-9)
-    pred = result.predicted
-    assert pred[0] == pytest.approx([0.0, 0.0, 7.0, 0.0])
-    np.testing.assert_allclose(pred, kinematic_rollout(pred[0], result.accel, 0.2), atol=1e-9)
-    beside = pred[(pred[:, 0] >= 10.0) & (pred[:, 0] <= 12.0)]
-    assert len(beside) and np.all(beside[:, 1] > 0.0)  # steering left, away from the obstacle centre
-    assert result.accel[0, 1] > 3.0
+    np.testing.assert_allclose(result.accel / 6.0, [[0.0, 1.0], [0.0, 1.0]], atol=0.05)
+    assert result.cost <= costs[i, j] + 1e-9
+
+
+# --- receding horizon --------------------------------------------------------------------------
+
+def test_relaxed_case_clears_the_zone_and_returns_to_the_lane() -> None:
+    """v = 5 m/s, zone 25–27 m ahead, w = 2 m, Example emp:eta's first weight set."""
+    th = threat(w=2.0, x_min=25.0)
+    traj, results = receding_horizon(MpcParams(eta=EQUAL), th, [0.0, 0.0, 5.0, 0.0], 5.0, steps=60)
+    beside = (traj[:, 0] >= th.obstacle.x_min) & (traj[:, 0] <= th.obstacle.x_max)
+    assert beside.any() and np.all(traj[beside, 1] > th.w)  # the CoG passes outside the danger zone
+    assert traj[:, 2].min() > 4.0  # without stopping
+    assert traj[-1, 0] > 40.0 and abs(traj[-1, 1]) < 0.2 and traj[-1, 2] == pytest.approx(5.0, abs=0.1)
+    assert all(r.status in ("converged", "capped") for r in results)
+
+
+def test_relaxed_case_with_the_default_weights_never_enters_the_zone() -> None:
+    """With η₃ = 0.05 braking is cheap and lowers y_safe: MPC alone may slow down to a crawl
+    in front of the zone (docs/design.md), but it never enters it and never reverses."""
+    th = threat(w=2.0, x_min=25.0)
+    traj, _ = receding_horizon(DEFAULT, th, [0.0, 0.0, 5.0, 0.0], 5.0, steps=60)
+    inside = [th.obstacle.contains(x, y) for x, y in traj[:, :2]]
+    assert not any(inside)
+    assert traj[:, 2].min() >= 0.0
+
+
+@pytest.mark.parametrize("params", [DEFAULT, CLIPPED], ids=["paper", "clipped"])
+def test_extreme_case_evades_to_the_safe_side(params: MpcParams) -> None:
+    """The notes' problem (v = 7, x_obs = 10 m, w = 2.6 m): infeasible at detection.  With the
+    clipped barrier the car is back in its lane at speed 12 s later; the paper's −log d keeps
+    rewarding distance while the obstacle is near, and the car swings out further."""
+    th = threat()
+    traj, results = receding_horizon(params, th, [0.0, 0.0, 7.0, 0.0], 7.0, steps=60)
+    beside = (traj[:, 0] >= th.obstacle.x_min) & (traj[:, 0] <= th.obstacle.x_max)
+    assert beside.any() and np.all(traj[beside, 1] > th.w)
+    assert results[0].accel[0, 1] == pytest.approx(6.0)  # full steering away at detection
+    if params.barrier == "clipped":
+        assert abs(traj[-1, 1]) < 0.3 and traj[-1, 2] == pytest.approx(7.0, abs=0.2)
+    else:
+        clipped, _ = receding_horizon(CLIPPED, th, [0.0, 0.0, 7.0, 0.0], 7.0, steps=60)
+        assert traj[:, 1].max() > clipped[:, 1].max() + 1.0
+
+
+def test_infeasible_start_has_a_finite_cost_and_steers_away() -> None:
+    for side in (1, -1):
+        th = threat(w=2.6, x_min=5.0, side=side)  # τ = 0.7 s: y_safe ≈ w over the whole horizon
+        planner = MpcPlanner(DEFAULT, VEHICLE)
+        inp = PlannerInput(0.0, state(7.0), th, 7.0, None)
+        assert y_safe(0.0, 7.0, 5.0, 2.6, DEFAULT.epsilon) > 2.5  # the log is undefined at the start
+        result = planner.plan(inp)
+        assert math.isfinite(result.cost) and np.all(np.isfinite(result.accel))
+        assert result.status in ("converged", "capped")
+        assert side * result.accel[0, 1] == pytest.approx(6.0)
+        assert result.cost < planner.cost(inp, np.zeros((10, 2)))
+
+
+def test_lane_keeping_without_a_threat() -> None:
+    traj, results = receding_horizon(DEFAULT, None, [0.0, 1.5, 5.0, 0.0], 6.0, steps=40)
+    assert results[0].accel[0, 1] < 0.0 and results[0].accel[0, 0] > 0.0
+    assert abs(traj[-1, 1]) < 0.1 and traj[-1, 2] == pytest.approx(6.0, abs=0.1)
+    assert np.all(np.abs(traj[:, 1]) <= 1.5 + 1e-9)  # no overshoot beyond the start
+
+
+# --- statuses, robustness ----------------------------------------------------------------------
+
+def test_statuses() -> None:
+    inp = PlannerInput(0.0, state(), threat(), 7.0, None)
+    capped = MpcPlanner(MpcParams(caps=SolverCaps(max_iter=1, max_fun_evals=10)), VEHICLE).plan(inp)
+    assert capped.status == "capped" and capped.iterations == 1
+    converged = MpcPlanner(MpcParams(caps=SolverCaps(max_iter=200, max_fun_evals=2000), max_iter_ls=8),
+                           VEHICLE).plan(inp)
+    assert converged.status == "converged" and converged.iterations < 200
+    late = MpcPlanner(MpcParams(time_budget_s=1e-9), VEHICLE).plan(inp)
+    assert late.status == "over_budget" and np.all(np.isfinite(late.accel))
+    for bad in (dataclasses.replace(state(), x=float("nan")), dataclasses.replace(state(), y=float("inf"))):
+        failed = MpcPlanner(DEFAULT, VEHICLE).plan(PlannerInput(0.0, bad, threat(), 7.0, np.full((10, 2), 9.0)))
+        assert failed.status == "failed" and failed.cost == math.inf
+        assert np.all(np.isfinite(failed.accel)) and np.all(np.isfinite(failed.predicted))
+        assert np.all(np.abs(failed.accel) <= 6.0)  # the clipped initial guess
+    nan_guess = MpcPlanner(DEFAULT, VEHICLE).plan(PlannerInput(0.0, state(), threat(), 7.0, np.full((10, 2), np.nan)))
+    assert nan_guess.status in ("converged", "capped") and math.isfinite(nan_guess.cost)
+
+
+def test_result_shapes_bounds_and_prediction() -> None:
+    for n_p in (2, 10, 20):
+        params = MpcParams(N_p=n_p)
+        result = MpcPlanner(params, VEHICLE).plan(PlannerInput(0.0, state(), threat(), 7.0, np.zeros((3, 2))))
+        assert result.accel.shape == (n_p, 2) and result.predicted.shape == (n_p + 1, 4)
+        assert np.all(np.abs(result.accel) <= 6.0 + 1e-12)
+        np.testing.assert_allclose(result.predicted, kinematic_rollout(np.array([0, 0, 7.0, 0]), result.accel, 0.2))
+        assert result.cost == pytest.approx(MpcPlanner(params, VEHICLE).cost(
+            PlannerInput(0.0, state(), threat(), 7.0, None), result.accel / 6.0))
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.floats(0.0, 3.0), st.floats(1.0, 8.0), st.floats(-1.0, 0.2), st.floats(-1.0, 1.0))
+def test_speed_never_negative_and_never_worse_than_the_start(v: float, x_obs: float, ux: float, uy: float) -> None:
+    planner = MpcPlanner(DEFAULT, VEHICLE)
+    guess = np.tile([ux * 6.0, uy * 6.0], (10, 1))  # braking guesses find reversing without the floor
+    inp = PlannerInput(0.0, state(v), threat(w=2.0, x_min=x_obs), 0.0, guess)
+    result = planner.plan(inp)
+    assert result.predicted[:, 2].min() >= -1e-12
+    assert result.cost <= planner.cost(inp, planner.initial_guess(inp)) + 1e-12
+    assert np.all(np.abs(result.accel) <= 6.0 + 1e-12)
 
 
 def test_mirrored_side_gives_the_mirrored_solution() -> None:
-    planner = MpcPlanner(MpcParams(), VEHICLE)
-    left = planner.plan(PlannerInput(0.0, straight(), threat(side=1), 7.0, None))
-    right = planner.plan(PlannerInput(0.0, straight(), threat(side=-1), 7.0, None))
-    np.testing.assert_allclose(left.accel[:, 0], right.accel[:, 0], atol=1e-6)
-    np.testing.assert_allclose(left.accel[:, 1], -right.accel[:, 1], atol=1e-6)
+    planner = MpcPlanner(DEFAULT, VEHICLE)
+    for x_min in (6.0, 12.0, 20.0):
+        left = planner.plan(PlannerInput(0.0, state(6.0, y=1.0, vy=0.3), threat(w=2.4, x_min=x_min, y_path=1.2), 6.0,
+                                         None))
+        right = planner.plan(PlannerInput(0.0, state(6.0, y=1.4, vy=-0.3),
+                                          threat(w=2.4, x_min=x_min, side=-1, y_path=1.2), 6.0, None))
+        np.testing.assert_allclose(left.accel[:, 0], right.accel[:, 0], atol=1e-7)
+        np.testing.assert_allclose(left.accel[:, 1], -right.accel[:, 1], atol=1e-7)
+        assert left.cost == pytest.approx(right.cost, rel=1e-9)
 
 
-def test_example_2_converged_solution_brakes() -> None:
-    """Example 2: N_p = 2, v = 5, x_obs = w = 1, normalised inputs.
-
-    The paper reports [0.00, 0.53] (equal weights) and [-0.35, 1.00] (eta = 0.5, 0.25,
-    0.05, 0.2).  The obstacle is 0.2 s ahead: with the intended barrier and exact-hold
-    prediction no steering clears it inside the horizon, and the converged optimum of
-    both weight sets is full braking with no steering (docs/design.md, "Example 2").
-    """
-    inp = PlannerInput(0.0, straight(v=5.0), threat(w=1.0, x_min=1.0), 5.0, None)
-    caps = SolverCaps(max_iter=300, max_fun_evals=2000)
-    for eta in ((0.25, 0.25, 0.25, 0.25), (0.5, 0.25, 0.05, 0.2)):
-        result = MpcPlanner(MpcParams(N_p=2, eta=eta, caps=caps), VEHICLE).plan(inp)
-        assert result.status == "converged"
-        u = result.accel[0] / 6.0
-        assert u[0] == pytest.approx(-1.0, abs=1e-3) and abs(u[1]) < 0.05
+def test_warm_start_from_the_previous_solution_is_not_worse() -> None:
+    planner = MpcPlanner(DEFAULT, VEHICLE)
+    cold = planner.plan(PlannerInput(0.0, state(), threat(), 7.0, None))
+    warm = planner.plan(PlannerInput(0.0, state(), threat(), 7.0, cold.accel))
+    assert warm.cost <= cold.cost + 1e-12
 
 
-def test_lane_keeping_without_threat_and_speed_never_reverses() -> None:
-    planner = MpcPlanner(MpcParams(), VEHICLE)
-    result = planner.plan(PlannerInput(0.0, straight(y=1.0), None, 7.0, None, y_lane=0.0))
-    assert result.accel[0, 1] < 0.0  # back towards the lane
-    braking = planner.plan(PlannerInput(0.0, straight(v=1.0), threat(x_min=3.0), 0.0, np.full((10, 2), -6.0)))
-    assert np.all(braking.predicted[:, 2] > -0.2)
+@pytest.mark.parametrize("change", [dict(solver="sqp_exact"), dict(solver="ipopt"), dict(speed_floor="constraint", qpsol="qpoases")])
+def test_solver_variants_solve_the_same_problem(change: dict) -> None:
+    inp = PlannerInput(0.0, state(), threat(), 7.0, None)
+    base = MpcPlanner(DEFAULT, VEHICLE)
+    other = MpcPlanner(MpcParams(**change), VEHICLE).plan(inp)
+    assert other.status in ("converged", "capped")
+    assert other.accel[0, 1] == pytest.approx(6.0, abs=0.3)  # the same manoeuvre: full steering away
+    assert base.cost(inp, other.accel / 6.0) < base.cost(inp, np.zeros((10, 2)))
 
 
-def test_statuses() -> None:
-    capped = MpcPlanner(MpcParams(caps=SolverCaps(max_iter=1, max_fun_evals=10)), VEHICLE)
-    assert capped.plan(PlannerInput(0.0, straight(), threat(), 7.0, None)).status == "capped"
-    late = MpcPlanner(MpcParams(time_budget_s=1e-9), VEHICLE)
-    assert late.plan(PlannerInput(0.0, straight(), threat(), 7.0, None)).status == "over_budget"
-    bad = MpcPlanner(MpcParams(), VEHICLE).plan(
-        PlannerInput(0.0, dataclasses.replace(straight(), x=float("nan")), threat(), 7.0, None))
-    assert bad.status == "failed" and np.all(np.isfinite(bad.accel)) and bad.cost == math.inf
-
-
-def test_warm_start_from_a_good_guess_is_not_worse() -> None:
-    planner = MpcPlanner(MpcParams(), VEHICLE)
-    cold = planner.plan(PlannerInput(0.0, straight(), threat(), 7.0, None))
-    warm = planner.plan(PlannerInput(0.0, straight(), threat(), 7.0, cold.accel))
-    assert warm.cost <= cold.cost + 1e-6
+def test_problem_is_built_once() -> None:
+    a, b = MpcPlanner(DEFAULT, VEHICLE), MpcPlanner(MpcParams(), VEHICLE)
+    assert a._nlp is b._nlp  # same parameter set: one NLP, parametric in the planning inputs
+    assert PAPER_CAPS == SolverCaps(10, 100, 1e-3, 1e-3, 1e-3)
 
 
 def test_parameters_are_validated() -> None:
@@ -103,3 +330,13 @@ def test_parameters_are_validated() -> None:
         MpcParams(eta=(0.5, 0.5, 0.5, 0.5))
     with pytest.raises(ParamError, match="max_iter_ls"):
         MpcParams(max_iter_ls=20)
+    with pytest.raises(ParamError, match="barrier_clearance"):
+        MpcParams(barrier_clearance=0.2)
+    with pytest.raises(ParamError, match="barrier = 'log'"):
+        MpcParams(barrier="log")
+    with pytest.raises(ParamError, match="solver"):
+        MpcParams(solver="fmincon")  # type: ignore[arg-type]
+    with pytest.raises(ParamError, match="speed_floor"):
+        MpcParams(speed_floor="constraint")  # with qrqp
+    with pytest.raises(ParamError, match="max_fun_evals"):
+        SolverCaps(max_iter=10, max_fun_evals=5)

@@ -1,31 +1,42 @@
 """MPC planner on the kinematic model: eqs. (skin), (ysafe), (costs), (jcaldef), (planmpc).
 
-Decision variables are the normalised inputs ũ ∈ [−1, 1]^(2 N_p) (single
-shooting, eq. (planmpc)); the predicted states are functions of them.  Choices
-where the paper is silent or inconsistent (docs/design.md, "MPC"):
+The decision variables are the 2 N_p inputs ũ = [v̇_X, v̇_Y] over the horizon,
+normalised to [−1, 1] by (a_x_max, a_y_max) (eq. (utilde); Example emp:eta's
+normalisation); the predicted states are functions of them inside the cost
+(single shooting, as eq. (planmpc) states).  The NLP is built once per parameter
+set and is parametric in the state, v_des, the obstacle's extent, w, the evasion
+side, the ego path, ε (i.e. μ) and the input bounds (:data:`PARAMETERS`).
 
-* Discretisation of eq. (skin): exact zero-order hold, p⁺ = p + t_s v + t_s²/2 a,
-  v⁺ = v + t_s a (forward Euler would leave y_1 = y_0 whatever the input).
-* Mirrored frame: the lateral offset toward the evasion side ỹ = s (y − y_path)
-  (s = Threat.side), so one problem serves both sides.
-* Barrier: J_safe = B(ỹ − y_safe) with B(d) = −log d — the ego kept *above*
-  the sigmoid, which is what Example 2 and Fig. 4 describe (the printed
-  −log(y_safe − y) would keep it below and steer into the obstacle).  Below
-  d₀ the logarithm is continued by its second-order Taylor polynomial, so an
-  infeasible start (y_safe ≈ w at detection) has finite cost and gradient.
-* y_safe, eq. (ysafe), in tanh form (no overflow), x_obs = the obstacle's near
-  edge, √(w v_X²) regularised at v_X → 0.  The paper's sigmoid never falls; we
-  multiply the barrier by a falling sigmoid past the obstacle's far edge and
-  add a lane-return term |ỹ| gated by the same sigmoid (η_return): the paper's
-  car returns to its initial lateral position after passing.
-* J_steer = |ũ_Y| on the normalised input (Example 2 normalises inputs).
-* v_X ≥ 0 by a quadratic penalty (braking guesses otherwise find reversing).
-* Solver: CasADi ``sqpmethod`` with the active-set QP solver ``qrqp`` and a
-  limited-memory (L-BFGS) Hessian: at the paper's caps it was both faster and
-  reached lower cost than a regularised exact Hessian (2.2 ms, cost −3.25) and
-  than SciPy SLSQP (bench/bench_mpc.py; docs/design.md has the table).  Its iteration cap is the paper's 10; each iteration
-  evaluates the functions at most 1 + ``max_iter_ls`` times, so the paper's
-  100 function evaluations are never reached with ``max_iter_ls`` ≤ 9.
+Choices where the paper is silent or inconsistent (docs/design.md, "MPC"):
+
+* eq. (skin) is discretised with the exact zero-order hold
+  p⁺ = p + t_s v + t_s²/2 a, v⁺ = v + t_s a (forward Euler would give
+  y(k+1) = y(k) whatever the input: the first predicted step could not react).
+* Barrier sign: the printed J_safe = −log(y_safe − y) keeps the ego *below* the
+  sigmoid, i.e. in the obstacle; Example emp:eta and Fig. barrier describe the ego
+  kept above it.  We use the offset toward the evasion side ỹ = s (y − y_path)
+  and d = ỹ − y_safe.
+* Barrier shape (:func:`j_safe`): −log d as printed (``barrier = "paper"``, the
+  default) keeps rewarding distance from y_safe, and at the paper's caps the MPC
+  alone overreacts in the extreme case (8 m swerve).  ``barrier = "clipped"``
+  subtracts its tangent at a clearance c and is 0 beyond it (C¹): no reward for
+  moving further out.  Either way, below the margin d₀ it is continued by its
+  second-order Taylor polynomial, so an infeasible start (y_safe ≈ w at
+  detection) has a finite cost and a gradient toward the safe side.
+* eq. (ysafe) is evaluated in tanh form (no overflow), √(w v_X²) as
+  √w √(v_X² + v_reg²); |·| as √(·² + ε_abs²) − ε_abs (smooth at 0).
+* The paper's sigmoid never falls again; the car must return to its lane after the
+  obstacle.  J_safe is multiplied by a falling sigmoid, ½ at ``pass_margin`` past
+  the obstacle's far edge, and a lane-keeping term η_return |ỹ| (not in the
+  paper) is added at every step, with or without a threat.  Gating it on being
+  past the obstacle was measured worse: the cost jump on passing made braking to
+  a stop before the obstacle cheaper than passing.
+* J_steer(k+i) uses the input that produces the state k+i, u(k+i−1), normalised.
+* v_X ≥ 0: a quadratic penalty on min(v_X, 0) (bounds-only QPs, fast) or linear
+  constraints; either way the returned plan is projected onto v_X ≥ 0.
+* Solver: CasADi ``sqpmethod`` + ``qrqp`` with a BFGS Hessian and a halving line
+  search, chosen by measurement (bench/bench_mpc.py); Table II's caps are
+  :data:`PAPER_CAPS`.
 """
 from __future__ import annotations
 
@@ -33,27 +44,47 @@ import dataclasses
 import math
 import time
 from functools import lru_cache
+from typing import Any, Literal
 
 import casadi as ca
 import numpy as np
 
 from .params import G, VehicleParams, check, non_negative, positive
-from .signals import PlannerInput, PlanResult
+from .signals import PlannerInput, PlanResult, PlanStatus
+
+SolverName = Literal["sqp_lbfgs", "sqp_exact", "ipopt"]
+"""``sqp_lbfgs``: sqpmethod with a BFGS Hessian (default); ``sqp_exact``: sqpmethod with the
+exact Hessian, regularised to be positive definite; ``ipopt``: interior point (reference)."""
+
+QpSolverName = Literal["qrqp", "qpoases"]
+"""QP solver of ``sqpmethod``."""
+
+BarrierName = Literal["paper", "clipped"]
+"""``paper``: J_safe = −log d, which keeps rewarding distance from y_safe; ``clipped``: 0 beyond a clearance."""
+
+SpeedFloor = Literal["penalty", "constraint"]
+"""How v_X ≥ 0 enters the NLP."""
 
 
 @dataclasses.dataclass(frozen=True)
 class SolverCaps:
-    """Stopping criteria of the NLP solver (Table II)."""
+    """Stopping criteria of the NLP solver (Table II of the paper)."""
 
     max_iter: int = 10
+    """Maximum number of SQP iterations."""
     max_fun_evals: int = 100
+    """Maximum number of cost evaluations (guaranteed through ``MpcParams.max_iter_ls``)."""
     constraint_tol: float = 1e-3
+    """Primal infeasibility tolerance."""
     optimality_tol: float = 1e-3
+    """Tolerance on the inf-norm of the gradient of the Lagrangian."""
     step_tol: float = 1e-3
+    """Stop when the inf-norm of the step (normalised inputs) falls below this."""
 
     def __post_init__(self) -> None:
-        check("max_iter", self.max_iter, lambda v: v >= 1, "at least 1")
-        check("max_fun_evals", self.max_fun_evals, lambda v: v >= self.max_iter, "at least max_iter")
+        check("max_iter", self.max_iter, lambda v: isinstance(v, int) and v >= 1, "an integer ≥ 1")
+        check("max_fun_evals", self.max_fun_evals, lambda v: isinstance(v, int) and v > self.max_iter,
+              "an integer above max_iter")
         for name in ("constraint_tol", "optimality_tol", "step_tol"):
             check(name, getattr(self, name), positive, "a positive tolerance")
 
@@ -64,209 +95,407 @@ PAPER_CAPS = SolverCaps()
 
 @dataclasses.dataclass(frozen=True)
 class MpcParams:
-    """MPC planner parameters (paper defaults)."""
+    """MPC planner parameters (paper defaults where the paper gives them)."""
 
     N_p: int = 10
     """Prediction horizon (steps)."""
     t_s: float = 0.2
     """Planning sampling time (s), Table I."""
     eta: tuple[float, float, float, float] = (0.5, 0.25, 0.05, 0.2)
-    """Weights of J_safe, J_stable, J_brake, J_steer (Example 2, second set)."""
+    """Weights η of J_safe, J_stable, J_brake, J_steer, eq. (jcaldef) (Example emp:eta's second set)."""
     eta_return: float = 0.1
-    """Weight of the lane-return term after the obstacle (not in the paper)."""
+    """Weight of the lane-keeping term η_return |ỹ| (not in the paper)."""
     a_x_max: float = 6.0
     """Bound of v̇_X (m/s²): the normalisation of the first input."""
     a_y_max: float = 6.0
     """Bound of v̇_Y (m/s²): the normalisation of the second input."""
     mu: float = 0.3
-    """Friction assumed by the barrier's ε = 1/√(8.8 μ g)."""
-    barrier_margin: float = 0.1
-    """d₀ (m): below it −log d is continued quadratically."""
+    """Friction the planner assumes in ε = 1/√(8.8 μ g), eq. (ysafe)."""
+    barrier_margin: float = 0.3
+    """d₀ (m): below it the barrier is continued by its second-order Taylor polynomial."""
+    barrier: BarrierName = "paper"
+    """J_safe's shape (:func:`j_safe`): ``paper`` −log d, or ``clipped`` at ``barrier_clearance``."""
+    barrier_clearance: float = 1.0
+    """c (m): clearance above y_safe beyond which the ``clipped`` J_safe is 0."""
     pass_margin: float = 1.0
-    """Distance past the obstacle's far edge where the barrier has fallen to half (m)."""
+    """Distance past the obstacle's far edge where J_safe has fallen to half (m); it falls over a
+    quarter of this (2 % left at the far edge)."""
     reverse_penalty: float = 100.0
-    """Weight of the v_X < 0 penalty."""
+    """Weight of min(v_X, 0)² when ``speed_floor`` is ``penalty``."""
     caps: SolverCaps = PAPER_CAPS
-    max_iter_ls: int = 3
-    """Line-search iterations per SQP iteration."""
+    """Stopping criteria (Table II)."""
+    max_iter_ls: int = 8
+    """Line-search iterations per SQP iteration (each evaluates the cost once)."""
+    ls_beta: float = 0.5
+    """Line-search backtracking factor."""
     time_budget_s: float = 0.2
-    """Wall-clock budget of one solve (s); above it the status is ``over_budget``."""
+    """Wall-clock budget of one plan (s), one planning period; above it the status is ``over_budget``."""
+    solver: SolverName = "sqp_lbfgs"
+    """NLP solver (docs/design.md, "MPC": chosen by bench/bench_mpc.py)."""
+    qpsol: QpSolverName = "qrqp"
+    """QP solver of ``sqpmethod``."""
+    speed_floor: SpeedFloor = "penalty"
+    """How v_X ≥ 0 enters the NLP; the returned plan is projected onto v_X ≥ 0 either way.
+    ``constraint`` (linear constraints on the inputs) needs ``qpsol = qpoases`` or IPOPT."""
+    v_reg: float = 0.5
+    """Speed regularising |v_Y / v_X| and √(w v_X²) at v_X → 0 (m/s)."""
+    abs_eps: float = 0.05
+    """Smoothing of |·|: √(x² + abs_eps²) − abs_eps."""
 
     def __post_init__(self) -> None:
-        check("N_p", self.N_p, lambda v: 1 <= v <= 100, "an integer in [1, 100]")
-        for name in ("t_s", "a_x_max", "a_y_max", "mu", "barrier_margin", "time_budget_s"):
+        check("N_p", self.N_p, lambda v: isinstance(v, int) and 1 <= v <= 100, "an integer in [1, 100]")
+        for name in ("t_s", "a_x_max", "a_y_max", "mu", "barrier_margin", "pass_margin", "time_budget_s",
+                     "v_reg", "abs_eps"):
             check(name, getattr(self, name), positive, "a positive number")
-        for name in ("eta_return", "pass_margin", "reverse_penalty"):
+        for name in ("eta_return", "reverse_penalty"):
             check(name, getattr(self, name), non_negative, "a non-negative number")
-        check("eta", self.eta, lambda e: all(0.0 <= v <= 1.0 for v in e) and abs(sum(e) - 1.0) < 1e-9,
+        check("barrier", self.barrier, lambda v: v in ("paper", "clipped"), "paper or clipped")
+        check("barrier_clearance", self.barrier_clearance, lambda v: v > self.barrier_margin,
+              "a clearance above barrier_margin")
+        check("eta", self.eta, lambda e: len(e) == 4 and all(0.0 <= v <= 1.0 for v in e) and abs(sum(e) - 1.0) < 1e-9,
               "a convex combination: four weights in [0, 1] summing to 1")
-        check("max_iter_ls", self.max_iter_ls, lambda v: 0 <= v and self.caps.max_iter * (1 + v) + 1 <= self.caps.max_fun_evals,
-              "line-search iterations that keep max_iter (1 + max_iter_ls) + 1 within max_fun_evals")
+        check("ls_beta", self.ls_beta, lambda v: 0.0 < v < 1.0, "a factor in (0, 1)")
+        check("solver", self.solver, lambda v: v in ("sqp_lbfgs", "sqp_exact", "ipopt"),
+              "one of sqp_lbfgs, sqp_exact, ipopt")
+        check("qpsol", self.qpsol, lambda v: v in ("qrqp", "qpoases"), "qrqp or qpoases")
+        check("speed_floor", self.speed_floor, lambda v: v in ("penalty", "constraint"), "penalty or constraint")
+        check("speed_floor", self.speed_floor, lambda v: v == "penalty" or self.qpsol == "qpoases" or self.solver == "ipopt",
+              "penalty with qrqp (qrqp stalls on the linear speed constraints: 220 ms measured); "
+              "constraint needs qpsol = qpoases or solver = ipopt")
+        check("max_iter_ls", self.max_iter_ls,
+              lambda v: isinstance(v, int) and v >= 0 and self.caps.max_iter * (1 + v) + 1 <= self.caps.max_fun_evals,
+              "an integer ≥ 0 with max_iter (1 + max_iter_ls) + 1 ≤ caps.max_fun_evals "
+              "(an SQP iteration evaluates the cost at most 1 + max_iter_ls times)")
 
     @property
     def epsilon(self) -> float:
-        """ε = 1/√(8.8 μ g) of eq. (ysafe)."""
-        return 1.0 / math.sqrt(8.8 * self.mu * G)
+        """ε of eq. (ysafe) for the planner's μ."""
+        return epsilon(self.mu)
 
 
-def smooth_abs(x, eps: float = 1e-3):
-    """|x| regularised at 0: √(x² + ε²) − ε."""
-    return ca.sqrt(x * x + eps * eps) - eps
+def epsilon(mu: float) -> float:
+    """ε = 1/√(8.8 μ g), eq. (ysafe)."""
+    return 1.0 / math.sqrt(8.8 * mu * G)
 
 
-def sigmoid(a):
-    """1 / (1 + e^a) written with tanh (no overflow)."""
-    return 0.5 * (1.0 - ca.tanh(0.5 * a))
+# ---------------------------------------------------------------------------
+# Cost terms: floats in, float out; CasADi symbols in, expression out
+# ---------------------------------------------------------------------------
+
+def _out(value: Any, *args: Any) -> Any:
+    """A CasADi result as a float when no argument was symbolic."""
+    if any(isinstance(a, (ca.SX, ca.MX)) for a in args):
+        return value
+    return float(value)
 
 
-def y_safe(x_ego, vX, x_obs: float, w: float, epsilon: float):
-    """eq. (ysafe): w / (1 + exp((x_obs − x − 4 v_X) / (ε √(w v_X²))))."""
-    scale = epsilon * ca.sqrt(w) * ca.sqrt(vX * vX + 0.25)
-    return w * sigmoid((x_obs - x_ego - 4.0 * vX) / scale)
+def smooth_abs(x: Any, eps: float = 0.05) -> Any:
+    """|x| regularised at 0: √(x² + eps²) − eps (0 at 0, within eps of |x|)."""
+    return _out(ca.sqrt(x * x + eps * eps) - eps, x)
 
 
-def j_safe(offset, ysafe, margin: float):
-    """eq. (jbarr) with the intended sign: −log(ỹ − y_safe), continued quadratically below ``margin``."""
-    d = offset - ysafe
-    dm = d - margin
-    taylor = -math.log(margin) - dm / margin + dm * dm / (2.0 * margin * margin)
-    return ca.if_else(d >= margin, -ca.log(ca.fmax(d, margin)), taylor)
+def sigmoid(a: Any) -> Any:
+    """1 / (1 + e^a) in tanh form, ½ (1 − tanh(a / 2)): no overflow for any a."""
+    return _out(0.5 * (1.0 - ca.tanh(0.5 * a)), a)
 
 
-def j_stable(vX, vY):
-    """eq. (jstab): |v_Y / v_X| (v_X regularised at 0)."""
-    return smooth_abs(vY) / ca.sqrt(vX * vX + 0.25)
+def y_safe(x_ego: Any, vX: Any, x_obs: Any, w: Any, eps: Any, v_reg: float = 0.5) -> Any:
+    """Sigmoid barrier, eq. (ysafe): w / (1 + exp((x_obs − x_ego − 4 v_X) / (ε √(w v_X²)))).
+
+    ``x_obs`` is the obstacle's near edge; √(w v_X²) is regularised as √w √(v_X² + v_reg²).
+    """
+    scale = eps * ca.sqrt(w) * ca.sqrt(vX * vX + v_reg * v_reg)
+    return _out(w * sigmoid((x_obs - x_ego - 4.0 * vX) / scale), x_ego, vX, x_obs, w, eps)
 
 
-def j_brake(vX, v_des):
-    """eq. (jvel): |v_X − v_des|."""
-    return smooth_abs(vX - v_des)
+def j_safe(y_tilde: Any, ysafe: Any, margin: float = 0.3, clearance: float | None = None) -> Any:
+    """J_safe, eq. (jbarr), with the intended sign: the ego kept above y_safe.
+
+    ``y_tilde`` is the offset toward the evasion side, s (y − y_path); d = ỹ − y_safe.
+    ``clearance`` None is the paper's −log d for d ≥ ``margin``.  A clearance c
+    gives the clipped variant −log(d / c) + d / c − 1: the paper's −log d minus
+    its tangent at c (the same repulsion near y_safe), 0 with zero slope for d ≥ c,
+    so moving further out is no longer rewarded.  Either way, below ``margin`` the
+    log branch is continued by its second-order Taylor polynomial at the margin
+    (finite, convex and decreasing), so an infeasible start has a finite cost.
+    """
+    m = margin
+    d = y_tilde - ysafe
+    dm = d - m
+    if clearance is None:
+        taylor = -math.log(m) - dm / m + dm * dm / (2.0 * m * m)
+        inner = -ca.log(ca.fmax(d, m))
+    else:
+        c = clearance
+        taylor = (-math.log(m / c) + m / c - 1.0) + (1.0 / c - 1.0 / m) * dm + dm * dm / (2.0 * m * m)
+        dd = ca.fmin(ca.fmax(d, m), c)
+        inner = -ca.log(dd / c) + dd / c - 1.0
+    return _out(ca.if_else(d >= m, inner, taylor), y_tilde, ysafe)
 
 
-def j_steer(u_y_normalised):
-    """eq. (jsteer): |v̇_Y| on the normalised input."""
-    return smooth_abs(u_y_normalised)
+def j_stable(vX: Any, vY: Any, v_reg: float = 0.5, eps: float = 0.05) -> Any:
+    """J_stable, eq. (jstab): |v_Y / v_X|, v_X regularised as √(v_X² + v_reg²)."""
+    return _out(smooth_abs(vY, eps) / ca.sqrt(vX * vX + v_reg * v_reg), vX, vY)
 
 
-N_PARAM = 11
-"""Problem parameters: x, ỹ, v_X, ṽ_Y, v_des, x_min, x_max, w, active, a_x_max, a_y_max."""
+def j_brake(vX: Any, v_des: Any, eps: float = 0.05) -> Any:
+    """J_brake, eq. (jvel): |v_X − v_des|."""
+    return _out(smooth_abs(vX - v_des, eps), vX, v_des)
 
 
-@lru_cache(maxsize=8)
-def _build(params: MpcParams) -> tuple[ca.Function, ca.Function]:
-    n = params.N_p
-    u = ca.SX.sym("u", 2 * n)
-    p = ca.SX.sym("p", N_PARAM)
-    x, y, vX, vY, v_des, x_min, x_max, w, active, ax_max, ay_max = (p[i] for i in range(N_PARAM))
-    ts = params.t_s
-    e1, e2, e3, e4 = params.eta
-    eps = params.epsilon
-    cost = 0
-    states = [ca.vertcat(x, y, vX, vY)]
-    for k in range(n):
-        ax = u[2 * k] * ax_max
-        ay = u[2 * k + 1] * ay_max
-        x = x + ts * vX + 0.5 * ts * ts * ax
-        y = y + ts * vY + 0.5 * ts * ts * ay
-        vX = vX + ts * ax
-        vY = vY + ts * ay
-        states.append(ca.vertcat(x, y, vX, vY))
-        scale = eps * ca.sqrt(ca.fmax(w, 1e-3)) * ca.sqrt(vX * vX + 0.25)
-        passed = sigmoid((x_max + params.pass_margin - x) / scale)  # 1 before, 0 after the obstacle
-        barrier = j_safe(y, y_safe(x, vX, x_min, ca.fmax(w, 1e-3), eps), params.barrier_margin)
-        cost += active * (e1 * passed * barrier + params.eta_return * (1 - passed) * smooth_abs(y))
-        cost += (1 - active) * params.eta_return * smooth_abs(y)
-        cost += e2 * j_stable(vX, vY) + e3 * j_brake(vX, v_des) + e4 * j_steer(u[2 * k + 1])
-        cost += params.reverse_penalty * ca.fmin(vX, 0) ** 2
-    caps = params.caps
-    solver = ca.nlpsol(
-        "mpc", "sqpmethod", {"x": u, "p": p, "f": cost},
-        {
-            "qpsol": "qrqp",
-            "qpsol_options": {"print_iter": False, "print_header": False, "print_info": False, "error_on_fail": False},
-            "hessian_approximation": "limited-memory",
-            "max_iter": caps.max_iter,
-            "max_iter_ls": params.max_iter_ls,
-            "tol_pr": caps.constraint_tol,
-            "tol_du": caps.optimality_tol,
-            "min_step_size": caps.step_tol * 1e-3,
-            "print_header": False, "print_iteration": False, "print_status": False, "print_time": False,
-            "error_on_fail": False,
-        },
-    )
-    rollout = ca.Function("rollout", [u, p], [ca.horzcat(*states).T, cost])
-    return solver, rollout
+def j_steer(vY_dot_normalised: Any, eps: float = 0.05) -> Any:
+    """J_steer, eq. (jsteer): |v̇_Y|, on the input normalised by a_y_max."""
+    return _out(smooth_abs(vY_dot_normalised, eps), vY_dot_normalised)
 
 
-class MpcPlanner:
-    """The MPC planner: one NLP built once, solved at every planning instant."""
+def j_return(y_tilde: Any, eps: float = 0.05) -> Any:
+    """Lane-keeping term |ỹ| (not in the paper): distance to the ego path (or the lane)."""
+    return _out(smooth_abs(y_tilde, eps), y_tilde)
 
-    def __init__(self, params: MpcParams, vehicle: VehicleParams) -> None:
-        self.params = params
-        self.vehicle = vehicle
-        self._solver, self._rollout = _build(params)
 
-    def _problem(self, inp: PlannerInput) -> tuple[np.ndarray, float, float]:
-        """Parameter vector in the mirrored frame, the side and the path offset."""
-        est, threat, prm = inp.estimate, inp.threat, self.params
-        side = float(threat.side) if threat is not None else 1.0
-        y_path = threat.y_path if threat is not None else inp.y_lane
-        if threat is not None:
-            obstacle, w, active = threat.obstacle, threat.w, 1.0
-            x_min, x_max = obstacle.x_min, obstacle.x_max
-        else:
-            x_min = x_max = w = active = 0.0
-        p = np.array([est.x, side * (est.y - y_path), est.vX, side * est.vY, inp.v_des,
-                      x_min, x_max, w, active, prm.a_x_max, prm.a_y_max])
-        return p, side, y_path
+def past_obstacle(x_ego: Any, x_far: Any, margin: float = 1.0) -> Any:
+    """0 before the obstacle, 1 past it: a sigmoid ½ at ``x_far + margin``, width ``margin / 4`` (not in the paper)."""
+    return _out(sigmoid((x_far + margin - x_ego) / (0.25 * margin)), x_ego, x_far)
 
-    def plan(self, inp: PlannerInput) -> PlanResult:
-        prm = self.params
-        n = prm.N_p
-        p, side, y_path = self._problem(inp)
-        scale = np.array([prm.a_x_max, side * prm.a_y_max])
-        if inp.initial_guess is not None:
-            guess = np.asarray(inp.initial_guess, dtype=float)[:n] / scale
-        else:
-            guess = np.zeros((n, 2))
-        guess = np.clip(np.nan_to_num(guess, nan=0.0), -1.0, 1.0).ravel()
-        start = time.perf_counter()
-        status = "failed"
-        iterations = 0
-        solution = guess
-        cost = math.inf
-        if np.all(np.isfinite(p)):
-            try:
-                sol = self._solver(x0=guess, p=p, lbx=-1.0, ubx=1.0)
-                stats = self._solver.stats()
-                iterations = int(stats.get("iter_count", 0))
-                candidate = np.asarray(sol["x"], dtype=float).ravel()
-                if np.all(np.isfinite(candidate)):
-                    solution = np.clip(candidate, -1.0, 1.0)
-                    cost = float(sol["f"])
-                    status = "converged" if stats.get("success", False) else (
-                        "capped" if stats.get("return_status") == "Maximum_Iterations_Exceeded" or iterations >= prm.caps.max_iter
-                        else "failed")
-            except RuntimeError:
-                status = "failed"
-        elapsed = time.perf_counter() - start
-        if status != "failed" and elapsed > prm.time_budget_s:
-            status = "over_budget"
-        accel = solution.reshape(n, 2) * scale
-        est = inp.estimate
-        start_state = np.nan_to_num(np.array([est.x, est.y, est.vX, est.vY]))
-        return PlanResult(
-            accel=accel, status=status, iterations=iterations, solve_time_s=elapsed,
-            cost=cost if status != "failed" else math.inf, predicted=kinematic_rollout(start_state, accel, prm.t_s),
-        )
+
+# ---------------------------------------------------------------------------
+# Prediction and NLP
+# ---------------------------------------------------------------------------
+
+PARAMETERS = ("x", "y", "vX", "vY", "v_des", "x_near", "x_far", "w", "side", "y_path", "active",
+              "epsilon", "a_x_max", "a_y_max")
+"""Order of the NLP's parameter vector (``active`` = 1 with a threat, 0 without)."""
+
+
+def kinematic_step(state: Any, accel: Any, t_s: float) -> tuple[Any, Any, Any, Any]:
+    """eq. (skin) over one period with the input held (exact zero-order hold)."""
+    x, y, vX, vY = state
+    aX, aY = accel
+    h = 0.5 * t_s * t_s
+    return x + t_s * vX + h * aX, y + t_s * vY + h * aY, vX + t_s * aX, vY + t_s * aY
 
 
 def kinematic_rollout(state: np.ndarray, accel: np.ndarray, t_s: float) -> np.ndarray:
     """eq. (skin) with exact zero-order hold: (N+1, 4) states [x, y, v_X, v_Y] from (N, 2) accelerations."""
+    accel = np.asarray(accel, dtype=float).reshape(-1, 2)
     out = np.empty((len(accel) + 1, 4))
     out[0] = state
     for k, a in enumerate(accel):
-        x, y, vX, vY = out[k]
-        out[k + 1] = (x + t_s * vX + 0.5 * t_s**2 * a[0], y + t_s * vY + 0.5 * t_s**2 * a[1], vX + t_s * a[0], vY + t_s * a[1])
+        out[k + 1] = kinematic_step(out[k], a, t_s)
     return out
 
+
+def _cost_expression(params: MpcParams, u: Any, p: Any) -> tuple[Any, list[Any]]:
+    """𝒥 of eq. (jcaldef) with the lane-keeping and speed-floor terms, and the predicted v_X."""
+    x, y, vX, vY, v_des, x_near, x_far, w, side, y_path, active, eps, ax_max, ay_max = (
+        p[i] for i in range(len(PARAMETERS)))
+    e1, e2, e3, e4 = params.eta
+    ae, vr = params.abs_eps, params.v_reg
+    w_pos = ca.fmax(w, 1e-3)
+    cost = 0
+    speeds = []
+    state = (x, y, vX, vY)
+    for k in range(params.N_p):  # i = 1..N_p: the state produced by u(k+i-1)
+        uX, uY = u[2 * k], u[2 * k + 1]
+        state = kinematic_step(state, (uX * ax_max, uY * ay_max), params.t_s)
+        xk, yk, vXk, vYk = state
+        speeds.append(vXk)
+        y_tilde = side * (yk - y_path)
+        barrier = j_safe(y_tilde, y_safe(xk, vXk, x_near, w_pos, eps, vr), params.barrier_margin,
+                         params.barrier_clearance if params.barrier == "clipped" else None)
+        cost += active * e1 * (1.0 - past_obstacle(xk, x_far, params.pass_margin)) * barrier
+        cost += e2 * j_stable(vXk, vYk, vr, ae) + e3 * j_brake(vXk, v_des, ae) + e4 * j_steer(uY, ae)
+        cost += params.eta_return * j_return(y_tilde, ae)
+        if params.speed_floor == "penalty":
+            cost += params.reverse_penalty * ca.fmin(vXk, 0.0) ** 2
+    return cost, speeds
+
+
+def _solver_options(params: MpcParams) -> tuple[str, dict[str, Any]]:
+    caps = params.caps
+    quiet = {"print_time": False, "error_on_fail": False}
+    if params.solver == "ipopt":
+        return "ipopt", {**quiet, "ipopt": {
+            "max_iter": caps.max_iter, "tol": caps.optimality_tol, "constr_viol_tol": caps.constraint_tol,
+            "acceptable_tol": caps.optimality_tol, "print_level": 0, "sb": "yes"}}
+    if params.qpsol == "qrqp":
+        qp: dict[str, Any] = {"print_iter": False, "print_header": False, "print_info": False}
+    else:
+        qp = {"printLevel": "none"}
+    options: dict[str, Any] = {
+        **quiet,
+        "qpsol": params.qpsol,
+        "qpsol_options": {**qp, "error_on_fail": False},
+        "max_iter": caps.max_iter,
+        "max_iter_ls": params.max_iter_ls,
+        "beta": params.ls_beta,
+        "tol_pr": caps.constraint_tol,
+        "tol_du": caps.optimality_tol,
+        "min_step_size": caps.step_tol,
+        "print_header": False, "print_iteration": False, "print_status": False,
+    }
+    if params.solver == "sqp_exact":
+        options.update(hessian_approximation="exact", convexify_strategy="regularize")
+    else:
+        options.update(hessian_approximation="limited-memory")
+    return "sqpmethod", options
+
+
+@dataclasses.dataclass(frozen=True)
+class _Nlp:
+    solver: Any
+    cost: Any
+    n_g: int
+
+
+@lru_cache(maxsize=16)
+def _build(params: MpcParams) -> _Nlp:
+    """The NLP of eq. (planmpc), built once per parameter set."""
+    u = ca.SX.sym("u", 2 * params.N_p)
+    p = ca.SX.sym("p", len(PARAMETERS))
+    cost, speeds = _cost_expression(params, u, p)
+    nlp: dict[str, Any] = {"x": u, "p": p, "f": cost}
+    n_g = 0
+    if params.speed_floor == "constraint":
+        nlp["g"] = ca.vertcat(*speeds)
+        n_g = params.N_p
+    plugin, options = _solver_options(params)
+    return _Nlp(ca.nlpsol("mpc", plugin, nlp, options), ca.Function("mpc_cost", [u, p], [cost]), n_g)
+
+
+def speed_floor(vX0: float, params: MpcParams) -> np.ndarray:
+    """Lower bounds of v_X(k+i), i = 1..N_p: 0, or what full acceleration reaches if that is below 0."""
+    i = np.arange(1, params.N_p + 1)
+    return np.minimum(0.0, vX0 + i * params.t_s * params.a_x_max)
+
+
+def keep_speed_non_negative(u: np.ndarray, vX0: float, params: MpcParams) -> np.ndarray:
+    """Normalised (N_p, 2) inputs with each v̇_X raised just enough that v_X stays above :func:`speed_floor`."""
+    out = np.array(u, dtype=float)
+    if not math.isfinite(vX0):
+        return out
+    floor = speed_floor(vX0, params)
+    v = vX0
+    for k in range(params.N_p):
+        if v + params.t_s * out[k, 0] * params.a_x_max < floor[k]:
+            out[k, 0] = min((floor[k] - v) / (params.t_s * params.a_x_max), 1.0)
+        v += params.t_s * out[k, 0] * params.a_x_max
+    return out
+
+
+_CAPPED = ("Maximum_Iterations_Exceeded", "Maximum_Iterations_Reached")
+
+
+class MpcPlanner:
+    """The MPC planner of Sec. IV-B: one NLP built once, solved at every planning instant."""
+
+    def __init__(self, params: MpcParams, vehicle: VehicleParams) -> None:
+        self.params = params
+        self.vehicle = vehicle
+        self._nlp = _build(params)
+
+    @property
+    def scale(self) -> np.ndarray:
+        """(a_x_max, a_y_max): normalised input × scale = acceleration (m/s²)."""
+        return np.array([self.params.a_x_max, self.params.a_y_max])
+
+    def parameters(self, inp: PlannerInput) -> np.ndarray:
+        """The NLP's parameter vector (:data:`PARAMETERS`) at a planning instant."""
+        est, threat, prm = inp.estimate, inp.threat, self.params
+        if threat is not None:
+            box = threat.obstacle
+            geometry = (box.x_min, box.x_max, threat.w, float(threat.side), threat.y_path, 1.0)
+        else:  # lane keeping: no barrier, the lane is the path
+            geometry = (0.0, 0.0, 1.0, 1.0, inp.y_lane, 0.0)
+        return np.array([est.x, est.y, est.vX, est.vY, inp.v_des, *geometry,
+                         prm.epsilon, prm.a_x_max, prm.a_y_max], dtype=float)
+
+    def initial_guess(self, inp: PlannerInput) -> np.ndarray:
+        """Normalised (N_p, 2) starting point: the shifted previous blend, else zeros (keep speed and heading).
+
+        A shorter guess is padded with its last row, non-finite entries become 0, values are
+        clipped to [−1, 1] and braking is reduced where it would predict v_X < 0.
+        """
+        n = self.params.N_p
+        guess = np.zeros((n, 2))
+        if inp.initial_guess is not None:
+            given = np.asarray(inp.initial_guess, dtype=float).reshape(-1, 2)[:n]
+            if len(given):
+                guess[:len(given)] = given
+                guess[len(given):] = given[-1]
+            guess = guess / self.scale
+        guess = np.clip(np.nan_to_num(guess, nan=0.0, posinf=1.0, neginf=-1.0), -1.0, 1.0)
+        return keep_speed_non_negative(guess, inp.estimate.vX, self.params)
+
+    @property
+    def cost_function(self) -> Any:
+        """The CasADi function (u normalised (2 N_p), :meth:`parameters`) → 𝒥 the NLP minimises."""
+        return self._nlp.cost
+
+    def cost(self, inp: PlannerInput, u_normalised: np.ndarray) -> float:
+        """𝒥 of eq. (jcaldef) (with the lane-keeping and speed-floor terms) for normalised (N_p, 2) inputs."""
+        u = np.asarray(u_normalised, dtype=float).reshape(-1)
+        return float(self._nlp.cost(u, self.parameters(inp)))
+
+    def plan(self, inp: PlannerInput) -> PlanResult:
+        """Solve eq. (planmpc) at one planning instant, from :meth:`initial_guess`.
+
+        The result is never costlier than the start: with a capped line search the SQP
+        may accept an increasing step, and the start is then the best point known.
+        A non-finite problem or solver failure returns the start with status ``failed``
+        and cost ``inf``.
+        """
+        prm = self.params
+        p = self.parameters(inp)
+        guess = self.initial_guess(inp)
+        start = time.perf_counter()
+        status: PlanStatus = "failed"
+        iterations = 0
+        solution, cost = guess, math.inf
+        if np.all(np.isfinite(p)):
+            status, iterations, candidate, f = self._solve(guess, p)
+            if status != "failed":
+                solution = keep_speed_non_negative(np.clip(candidate, -1.0, 1.0), p[2], prm)
+                if not np.array_equal(solution, candidate):
+                    f = float(self._nlp.cost(solution.ravel(), p))
+                f_start = float(self._nlp.cost(guess.ravel(), p))
+                solution, cost = (guess, f_start) if f_start < f else (solution, f)
+        elapsed = time.perf_counter() - start
+        if status != "failed" and elapsed > prm.time_budget_s:
+            status = "over_budget"
+        accel = solution * self.scale
+        est = inp.estimate
+        state = np.array([est.x, est.y, est.vX, est.vY], dtype=float)
+        state[~np.isfinite(state)] = 0.0  # a failed plan on a non-finite estimate still predicts finite states
+        return PlanResult(accel=accel, status=status, iterations=iterations, solve_time_s=elapsed, cost=cost,
+                          predicted=kinematic_rollout(state, accel, prm.t_s))
+
+    def _solve(self, guess: np.ndarray, p: np.ndarray) -> tuple[PlanStatus, int, np.ndarray, float]:
+        """One NLP solve: (status, iterations, normalised (N_p, 2) inputs, cost)."""
+        args: dict[str, Any] = {"x0": guess.ravel(), "p": p, "lbx": -1.0, "ubx": 1.0}
+        if self._nlp.n_g:
+            args["lbg"] = speed_floor(p[2], self.params)
+            args["ubg"] = math.inf
+        try:
+            sol = self._nlp.solver(**args)
+            stats = self._nlp.solver.stats()
+        except RuntimeError:  # solver error, or CasADi could not report its statistics
+            return "failed", 0, guess, math.inf
+        iterations = int(stats.get("iter_count", 0))
+        candidate = np.asarray(sol["x"], dtype=float).reshape(self.params.N_p, 2)
+        f = float(sol["f"])
+        if not (np.all(np.isfinite(candidate)) and math.isfinite(f)):
+            return "failed", iterations, guess, math.inf
+        return self._status(stats), iterations, candidate, f
+
+    @staticmethod
+    def _status(stats: dict[str, Any]) -> PlanStatus:
+        """converged | capped | failed from the solver's statistics."""
+        returned = str(stats.get("return_status", ""))
+        if stats.get("success", False) or returned in ("Solve_Succeeded", "Solved_To_Acceptable_Level"):
+            return "converged"
+        if returned == "Search_Direction_Becomes_Too_Small":
+            return "converged"  # step below step_tol: fmincon's exit flag 2 (Table II's step tolerance)
+        if returned in _CAPPED or stats.get("unified_return_status") == "SOLVER_RET_LIMITED":
+            return "capped"
+        return "failed"
