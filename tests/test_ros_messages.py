@@ -1,6 +1,9 @@
 """The DDS path's CDR equals rosbags' serialize_cdr for every message type the graph uses."""
 from __future__ import annotations
 
+import re
+import xml.etree.ElementTree as ET
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -9,9 +12,13 @@ from rosbags.interfaces import Nodetype
 
 from moose_ros.interfaces import dds_type_name, from_rosbags, make, message_class, msg_dir, to_rosbags, typestore
 
+ROOT = Path(__file__).resolve().parents[1]
+PKG = ROOT / "ros2_ws" / "src" / "moose_msgs"
 OURS = sorted(f"moose_msgs/msg/{p.stem}" for p in msg_dir().glob("*.msg"))
 STANDARD = ["nav_msgs/msg/Odometry", "sensor_msgs/msg/Imu", "diagnostic_msgs/msg/DiagnosticArray",
-            "rosgraph_msgs/msg/Clock", "std_msgs/msg/Header"]
+            "diagnostic_msgs/msg/DiagnosticStatus", "diagnostic_msgs/msg/KeyValue",
+            "rosgraph_msgs/msg/Clock", "std_msgs/msg/Header", "builtin_interfaces/msg/Time",
+            "geometry_msgs/msg/PoseWithCovariance", "geometry_msgs/msg/TwistWithCovariance"]
 
 
 def fill(type_name: str, seed: int) -> Any:
@@ -72,3 +79,60 @@ def test_fixed_arrays_have_their_size() -> None:
     imu = make("sensor_msgs/msg/Imu")
     assert len(imu.orientation_covariance) == 9
     assert np.asarray(to_rosbags(imu).orientation_covariance).shape == (9,)
+
+
+def test_every_type_the_code_names_is_covered_by_the_cdr_test() -> None:
+    """A type used anywhere in the runtime, nodes, bags or core must be in the byte-equality test above."""
+    used: set[str] = set()
+    for folder in (ROOT / "ros2_ws" / "src" / "moose_ros", ROOT / "src" / "moose"):
+        for path in folder.rglob("*.py"):
+            used |= set(re.findall(r"[\"']([a-z_]+/msg/[A-Z][A-Za-z0-9]*)[\"']", path.read_text(encoding="utf-8")))
+    assert {"nav_msgs/msg/Odometry", "moose_msgs/msg/Threat"} <= used  # the scan finds what it should
+    assert used - {"package/msg/Type"} <= set(OURS + STANDARD)  # minus the format example in error texts
+
+
+def test_package_builds_every_msg_file_with_declared_dependencies() -> None:
+    """CMakeLists lists exactly the .msg files; every package a .msg refers to is a dependency in
+    package.xml and CMakeLists; names follow rosidl's rules (else rosidl_generate_interfaces fails)."""
+    files = sorted(p.name for p in (PKG / "msg").glob("*.msg"))
+    cmake = (PKG / "CMakeLists.txt").read_text()
+    assert sorted(re.findall(r'"msg/(\w+\.msg)"', cmake)) == files
+    xml = ET.parse(PKG / "package.xml").getroot()
+    assert xml.findtext("name") == "moose_msgs"
+    depends = {e.text for e in xml.findall("depend")} | {e.text for e in xml.findall("build_depend")}
+    assert {"builtin_interfaces", "std_msgs", "geometry_msgs", "nav_msgs"} <= depends
+    assert xml.findtext("member_of_group") == "rosidl_interface_packages"
+    cmake_deps = set(re.search(r"DEPENDENCIES([^)]*)\)", cmake).group(1).split())
+    builtin = {"bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16", "int32", "uint32",
+               "int64", "uint64", "string", "wstring"}
+    for path in (PKG / "msg").glob("*.msg"):
+        assert re.match(r"^[A-Z][A-Za-z0-9]*$", path.stem)
+        for line in path.read_text().splitlines():
+            line = line.split("#", 1)[0].strip()
+            if not line:
+                continue
+            ftype, rest = line.split(None, 1)
+            base = re.sub(r"(\[\d*\]|\[<=\d+\])$", "", ftype)
+            if "=" in rest:  # constant
+                assert re.match(r"^[A-Z]([A-Z0-9_]*[A-Z0-9])?$", rest.split("=")[0].strip()), line
+                continue
+            name = rest.split()[0]
+            assert re.match(r"^(?!.*__)(?!.*_$)[a-z][a-z0-9_]*$", name), line
+            if base not in builtin and "/" in base:
+                package = base.split("/")[0]
+                assert package in depends and package in cmake_deps, f"{path.name}: {package} is not a dependency"
+            elif base not in builtin:
+                assert (PKG / "msg" / f"{base}.msg").is_file(), f"{path.name}: {base} is not defined"
+
+
+def test_make_names_unknown_fields_and_publish_values_normalise() -> None:
+    with pytest.raises(TypeError, match="moose_msgs/msg/WheelSpeeds has no field 'omega'"):
+        make("moose_msgs/msg/WheelSpeeds", omega=1.0)
+    with pytest.raises(KeyError, match="expected 'package/msg/Type'"):
+        make("Odometry")
+    from moose_ros.interfaces import normalise
+
+    msg = make("moose_msgs/msg/PlannerOutput", accel_x=np.arange(3.0), iterations=np.uint32(7), cost=np.float64(2.5))
+    normalise(msg)
+    assert msg.accel_x == [0.0, 1.0, 2.0] and type(msg.iterations) is int and type(msg.cost) is float
+    assert bytes(msg.serialize()) == bytes(typestore().serialize_cdr(to_rosbags(msg), "moose_msgs/msg/PlannerOutput"))

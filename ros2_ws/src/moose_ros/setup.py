@@ -1,4 +1,15 @@
-"""ament_python package of the moose node graph; also pip-installable without ROS 2."""
+"""ament_python package of the moose node graph; also pip-installable without ROS 2.
+
+Without ROS 2 (Cyclone DDS backend), from the repository root::
+
+    pip install -e . && pip install -e ros2_ws/src/moose_ros
+
+The DDS message types are generated at import from ``ros2_ws/src/moose_msgs/msg`` (found next to
+this package in the source tree, through the ament index, or at ``$MOOSE_MSG_DIR``), so the install
+must be editable or ``MOOSE_MSG_DIR`` set.  With ROS 2, ``colcon build`` installs it like any
+ament_python package (colcon does not install Python dependencies: the Docker image pip-installs
+the core first).
+"""
 from glob import glob
 
 from setuptools import setup
@@ -18,11 +29,15 @@ setup(
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
     ],
-    install_requires=["setuptools"],
+    python_requires=">=3.10",
+    # the core (distribution "moose-avoidance", this repository's root: not on PyPI, install it first),
+    # the DDS backend and the message definitions' parser
+    install_requires=["setuptools", "moose-avoidance", "cyclonedds>=0.10.5", "rosbags>=0.10", "numpy", "pyyaml"],
     zip_safe=True,
     maintainer="moose-avoidance maintainers",
     maintainer_email="maintainers@moose-avoidance.invalid",
     description="Node graph of the moose-test collision avoidance",
     license="Apache-2.0",
+    tests_require=["pytest"],
     entry_points={"console_scripts": [f"{node} = {PACKAGE}.nodes:{node}_main" for node in NODES]},
 )

@@ -277,7 +277,7 @@ def export(path: str | Path, out_dir: str | Path, topics: Optional[Sequence[str]
 def play(path: str | Path, node: Any, rate: float = 1.0, topics: Optional[Sequence[str]] = None, loop: bool = False,
          start: float = 0.0, clock: bool = False, stop: Optional[Any] = None) -> int:
     """Publish a bag's messages with their original timing (scaled by ``rate``); returns the count sent."""
-    from .runtime import QOS_CLOCK, QOS_DEFAULT
+    from .runtime import QOS_CLOCK, QOS_DEFAULT, QOS_LATCHED
 
     messages = list(read_bag(path, topics))
     if not messages:
@@ -297,7 +297,9 @@ def play(path: str | Path, node: Any, rate: float = 1.0, topics: Optional[Sequen
             if delay > 0:
                 time.sleep(delay)
             if m.topic not in publishers:
-                publishers[m.topic] = node.publisher(m.type_name, m.topic, QOS_DEFAULT)
+                # latched topics keep their durability (a volatile writer never matches a transient-local reader)
+                latched = m.topic in ("/perception/obstacles", "/diagnostics")
+                publishers[m.topic] = node.publisher(m.type_name, m.topic, QOS_LATCHED if latched else QOS_DEFAULT)
             if clock_pub is not None:
                 c = node.make("rosgraph_msgs/msg/Clock")
                 c.clock.sec, c.clock.nanosec = divmod(m.timestamp_ns, 1_000_000_000)

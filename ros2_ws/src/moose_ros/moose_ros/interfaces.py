@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
 import types as pytypes
 from functools import lru_cache
 from pathlib import Path
@@ -23,12 +24,19 @@ from rosbags.typesys import Stores, get_typestore, get_types_from_msg
 
 MSG_PACKAGE = "moose_msgs"
 
-_BASE = {
-    "bool": (bool, False), "byte": (idl.byte, 0), "char": (idl.uint8, 0),
+_BASE = {  # byte and char are uint8 on the wire and in rmw_cyclonedds' type information
+    "bool": (bool, False), "byte": (idl.uint8, 0), "char": (idl.uint8, 0),
     "int8": (idl.int8, 0), "uint8": (idl.uint8, 0), "int16": (idl.int16, 0), "uint16": (idl.uint16, 0),
     "int32": (idl.int32, 0), "uint32": (idl.uint32, 0), "int64": (idl.int64, 0), "uint64": (idl.uint64, 0),
     "float32": (idl.float32, 0.0), "float64": (idl.float64, 0.0), "string": (str, ""),
 }
+
+
+class UnknownMessageType(KeyError):
+    """A message type name that is malformed or defined nowhere; ``str()`` is the plain message."""
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else ""
 
 
 def msg_dir() -> Path:
@@ -59,10 +67,29 @@ def typestore() -> Any:
     return store
 
 
+_TYPE_NAME = re.compile(r"^[a-z][a-z0-9_]*/msg/[A-Z][A-Za-z0-9]*$")
+
+
+def check_type_name(type_name: str) -> None:
+    """Raise :class:`UnknownMessageType` unless ``type_name`` has the form ``pkg/msg/Type``."""
+    if not isinstance(type_name, str) or not _TYPE_NAME.match(type_name):
+        raise UnknownMessageType(f"message type {type_name!r} is invalid: expected 'package/msg/Type', "
+                                 "e.g. 'nav_msgs/msg/Odometry'")
+
+
 def dds_type_name(type_name: str) -> str:
     """``pkg/msg/Type`` → ``pkg::msg::dds_::Type_`` (rmw_cyclonedds)."""
+    check_type_name(type_name)
     pkg, kind, name = type_name.split("/")
     return f"{pkg}::{kind}::dds_::{name}_"
+
+
+def ros_type_name(dds_name: str) -> str:
+    """``pkg::msg::dds_::Type_`` → ``pkg/msg/Type`` (other names are returned unchanged)."""
+    parts = dds_name.split("::")
+    if len(parts) == 4 and parts[2] == "dds_" and parts[3].endswith("_"):
+        return f"{parts[0]}/{parts[1]}/{parts[3][:-1]}"
+    return dds_name
 
 
 def _field_type(node: tuple) -> tuple[Any, Any]:
@@ -84,10 +111,12 @@ def _field_type(node: tuple) -> tuple[Any, Any]:
 
 @lru_cache(maxsize=None)
 def message_class(type_name: str) -> type:
-    """The DDS dataclass of ``pkg/msg/Type``; raises KeyError naming an unknown type."""
+    """The DDS dataclass of ``pkg/msg/Type``; raises :class:`UnknownMessageType` (a KeyError) naming it."""
+    check_type_name(type_name)
     store = typestore()
     if type_name not in store.fielddefs:
-        raise KeyError(f"message type {type_name!r} is unknown (not a standard ROS 2 Jazzy type nor in {msg_dir()})")
+        raise UnknownMessageType(f"message type {type_name!r} is unknown (not a standard ROS 2 Jazzy type "
+                                 f"nor in {msg_dir()})")
     constants, fields = store.fielddefs[type_name]
     annotations: dict[str, Any] = {}
     defaults: dict[str, Any] = {}
@@ -108,9 +137,38 @@ def message_class(type_name: str) -> type:
     return cls
 
 
+def field_names(type_name: str) -> list[str]:
+    """The fields of ``pkg/msg/Type`` in ``.msg`` order."""
+    message_class(type_name)
+    return [name for name, _node in typestore().fielddefs[type_name][1]]
+
+
 def make(type_name: str, **fields: Any) -> Any:
-    """A message of ``type_name`` with the given fields (others default)."""
-    return message_class(type_name)(**fields)
+    """A message of ``type_name`` with the given fields (others default); unknown fields are a TypeError."""
+    cls = message_class(type_name)
+    unknown = sorted(set(fields) - set(cls.__dataclass_fields__))
+    if unknown:
+        raise TypeError(f"{type_name} has no field {unknown[0]!r}; fields: {', '.join(field_names(type_name))}")
+    return cls(**fields)
+
+
+def normalise(msg: Any) -> Any:
+    """Turn numpy arrays/scalars, tuples and ``array.array`` in ``msg`` into the plain Python values the DDS
+    serialiser takes (the DDS publisher retries with this when a write fails).  Portable node code assigns
+    lists to sequences: rclpy's generated classes take lists or ``array.array``, but no numpy array."""
+    for name in msg.__dataclass_fields__:
+        setattr(msg, name, _plain(getattr(msg, name)))
+    return msg
+
+
+def _plain(value: Any) -> Any:
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return normalise(value)
+    if isinstance(value, (list, tuple)) or type(value).__name__ in ("ndarray", "array"):
+        return [_plain(v) for v in value]
+    if hasattr(value, "item") and type(value).__module__ == "numpy":
+        return value.item()
+    return value
 
 
 def to_rosbags(msg: Any) -> Any:
