@@ -16,11 +16,20 @@ def worst_case_frame_bits(dlc: int) -> int:
     return 47 + 8 * dlc + (34 + 8 * dlc - 1) // 4
 
 
-def worst_case_bus_load(db: Any, bitrate: int) -> float:
-    """Share of the bus the periodic frames occupy in the worst case (0..1)."""
-    bits_per_second = 0.0
+def frame_loads(db: Any, bitrate: int) -> dict[str, float]:
+    """Worst-case share of the bus (0..1) of each periodic frame of ``db``, by name."""
+    if not (isinstance(bitrate, int) and bitrate > 0):
+        raise ValueError(f"bitrate = {bitrate!r} is invalid: expected a positive number of bit/s")
+    loads: dict[str, float] = {}
     for message in db.messages:
+        if message.is_extended_frame or message.is_fd:
+            raise ValueError(f"message {message.name} is not a classic 11-bit frame: the bound does not apply")
         if not message.cycle_time:
             raise ValueError(f"message {message.name} has no GenMsgCycleTime: its load cannot be bounded")
-        bits_per_second += worst_case_frame_bits(message.length) * 1000.0 / message.cycle_time
-    return bits_per_second / bitrate
+        loads[message.name] = worst_case_frame_bits(message.length) * 1000.0 / message.cycle_time / bitrate
+    return loads
+
+
+def worst_case_bus_load(db: Any, bitrate: int) -> float:
+    """Share of the bus the periodic frames occupy in the worst case (0..1)."""
+    return sum(frame_loads(db, bitrate).values())

@@ -12,11 +12,14 @@ from .codec import Codec
 
 def describe(frame: can.Message, codec: Codec) -> str:
     """One line: time, id, frame name and signals — or why the frame would be dropped."""
-    before = codec.stats.dropped
+    before = codec.stats.snapshot()
     decoded = codec.decode(frame)
     head = f"{frame.timestamp:14.6f}  {frame.arbitration_id:03X}  [{len(frame.data)}]  {bytes(frame.data).hex(' ')}"
+    if frame.is_error_frame:
+        return f"{head}  ERROR FRAME"
     if decoded is None:
-        reason = next(k for k, v in vars(codec.stats).items() if v > 0) if codec.stats.dropped > before else "invalid"
+        after = codec.stats.snapshot()
+        reason = next((k for k in after if after[k] > before[k]), "invalid")
         return f"{head}  DROPPED ({reason})"
     name, values = decoded
     signals = " ".join(f"{k}={v:g}" for k, v in values.items() if k not in ("Checksum",))

@@ -1,0 +1,248 @@
+"""Bridge and ECU cores under random and malformed traffic; bus health, status frames and the I/O shell."""
+from __future__ import annotations
+
+import math
+
+import can
+import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+
+from moose.canbus.bridge import BridgeCore
+from moose.canbus.bus import BusLink, open_bus
+from moose.canbus.codec import PROTECTED, Codec, command_checksum, load_database
+from moose.canbus.ecu import VehicleEcu
+from moose.canbus.health import BusHealth, BusState, HealthParams, error_frame_state
+from moose.canbus.safety import Command, GuardParams
+from moose.params import ParamError
+from moose.signals import EpsSample, GpsSample, ImuSample, WheelSpeedSample
+
+DB = load_database()
+GUARD = GuardParams()
+COMMAND_IDS = {DB.get_message_by_name(n).frame_id for n in PROTECTED}
+
+
+def is_valid_command_by_chance(frame: can.Message) -> bool:
+    data = bytes(frame.data)
+    return frame.arbitration_id in COMMAND_IDS and len(data) == 8 and command_checksum(frame.arbitration_id, data) == data[7]
+
+
+garbage = st.builds(
+    lambda i, data, ext, err, rtr: can.Message(arbitration_id=i, data=data, is_extended_id=ext, is_error_frame=err,
+                                              is_remote_frame=rtr and not err),
+    st.one_of(st.sampled_from([m.frame_id for m in DB.messages]), st.integers(0, 0x7FF), st.integers(0, 0x1FFFFFFF)),
+    st.binary(min_size=0, max_size=8), st.booleans(), st.booleans(), st.booleans(),
+)
+
+
+def tampered_frame(name: str, bit: int, flip: bool) -> can.Message:
+    """A frame of the DBC, encoded afresh (counter 0: a replay); command frames always with one bit flipped."""
+    message = DB.get_message_by_name(name)
+    frame = Codec(DB).encode(name, {s.name: 0.0 for s in message.signals if s.name not in ("Counter", "Checksum")})
+    if flip or name in PROTECTED:
+        data = bytearray(frame.data)
+        data[(bit // 8) % len(data)] ^= 1 << (bit % 8)
+        frame = can.Message(arbitration_id=frame.arbitration_id, data=bytes(data), is_extended_id=False)
+    return frame
+
+
+tampered = st.builds(tampered_frame, st.sampled_from([m.name for m in DB.messages]), st.integers(0, 63), st.booleans())
+garbage = st.one_of(garbage, tampered)
+wild = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.floats(-1e4, 1e4))
+
+
+def decoded_commands(frames: list[can.Message]) -> dict[str, dict[str, float]]:
+    out = {}
+    for frame in frames:
+        decoded = Codec(DB).decode(frame)
+        assert decoded is not None
+        out[decoded[0]] = decoded[1]
+    return out
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.lists(garbage, max_size=4), st.one_of(st.none(), st.tuples(wild, wild, wild, wild))),
+                min_size=1, max_size=40))
+def test_random_and_malformed_frames_never_crash_the_bridge_nor_reach_the_ecu(steps: list) -> None:
+    bridge, ecu = BridgeCore(GUARD), VehicleEcu()
+    sent: dict[str, dict[str, float]] = {}
+    for k, (junk, command) in enumerate(steps):
+        t = 0.01 * k
+        if command is not None:
+            bridge.on_command(Command(*command), t)
+        for frame in junk:
+            sample = bridge.on_frame(frame, t)
+            assert sample is None or isinstance(sample, (ImuSample, WheelSpeedSample, EpsSample, GpsSample))
+        frames = bridge.tick(t)
+        values = decoded_commands(frames)
+        steer, torque = values["CMD_STEER"], values["CMD_TORQUE"]
+        assert abs(steer["SteerAngleCmd"]) <= GUARD.delta_max + 1e-4 and abs(steer["SteerRateCmd"]) <= GUARD.steer_rate_limit + 1e-3
+        assert abs(torque["TorqueRL"]) <= GUARD.torque_max + 0.01 and abs(torque["TorqueRR"]) <= GUARD.torque_max + 0.01
+        if sent:  # rate limits between consecutive frames (one LSB of quantisation each side)
+            assert abs(steer["SteerAngleCmd"] - sent["CMD_STEER"]["SteerAngleCmd"]) <= GUARD.steer_rate_limit * 0.01 + 2e-4
+            for wheel in ("TorqueRL", "TorqueRR"):
+                assert abs(torque[wheel] - sent["CMD_TORQUE"][wheel]) <= GUARD.torque_rate_limit * 0.01 + 0.02
+        sent.update(values)
+        # the ECU receives the bridge's frames with the junk in between: only the bridge's are applied
+        for frame in junk:
+            assume(not is_valid_command_by_chance(frame))
+            ecu.on_frame(frame, t)
+        for frame in frames:
+            ecu.on_frame(frame, t)
+        u = ecu.plant_input(t)
+        assert u[0] == sent["CMD_STEER"]["SteerRateCmd"]
+        assert (u[1], u[2]) == (sent["CMD_TORQUE"]["TorqueRL"], sent["CMD_TORQUE"]["TorqueRR"])
+    assert ecu.codec.stats.bad_counter == 0  # the bridge's own sequence was never disturbed
+
+
+def test_valid_frames_with_a_wrong_counter_or_checksum_are_counted_and_reported() -> None:
+    car, bridge = Codec(DB), BridgeCore(GUARD)
+    eps = [car.encode("EPS_STATUS", {"SteerAngle": 0.01 * k}) for k in range(4)]
+    assert isinstance(bridge.on_frame(eps[0], 0.0), EpsSample)
+    assert bridge.on_frame(eps[0], 0.01) is None  # repeated counter: stale
+    gps = car.encode("GPS_POSITION", {"PosX": 1.0, "PosY": 2.0})
+    assert bridge.on_frame(can.Message(arbitration_id=gps.arbitration_id, data=bytes(gps.data)[:7],
+                                       is_extended_id=False), 0.02) is None  # DLC 7
+    ecu = VehicleEcu()
+    bridge_tx = Codec(DB)
+    cmd = bytearray(bridge_tx.encode("CMD_TORQUE", {"TorqueRL": 5.0, "TorqueRR": 5.0}).data)
+    cmd[7] ^= 0xFF
+    ecu.on_frame(can.Message(arbitration_id=0x101, data=bytes(cmd), is_extended_id=False), 0.0)
+    assert ecu.codec.stats.bad_checksum == 1 and list(ecu.plant_input(0.0)) == [0.0, 0.0, 0.0]
+    status = {}
+    for frame in bridge.tick(0.1):
+        decoded = Codec(DB).decode(frame)
+        assert decoded is not None
+        status[decoded[0]] = decoded[1]
+    s = status["BRIDGE_STATUS"]
+    assert (s["BadCounter"], s["BadFrame"], s["BadChecksum"], s["CommandTimeout"]) == (1, 1, 0, 1)
+    assert status["BRIDGE_HEARTBEAT"]["State"] == 1  # safe state: no command yet
+
+
+def test_gps_position_and_velocity_are_paired_by_their_counter() -> None:
+    car, bridge = VehicleEcu(), BridgeCore(GUARD)
+    fixes = [GpsSample(1.2 + k, 1.0 + k, 10.0 * k, -1.0, 5.0, 0.25) for k in range(3)]
+    frames = [car.encode(f, f.t) for f in fixes]
+    got = [bridge.on_frame(frames[0][0], 1.2), bridge.on_frame(frames[0][1], 1.2)]
+    assert got[0] is None and isinstance(got[1], GpsSample)
+    assert (got[1].x, got[1].y, got[1].vX, got[1].vY) == pytest.approx((0.0, -1.0, 5.0, 0.25), abs=1e-3)
+    assert got[1].t_measured == pytest.approx(1.0, abs=1e-3)
+    # fix 1 loses its velocity frame: its position must not be paired with fix 2's velocity
+    assert bridge.on_frame(frames[1][0], 2.2) is None
+    assert bridge.on_frame(frames[2][1], 3.2) is None
+    assert bridge.on_frame(frames[2][0], 3.2) is None  # position after velocity: the pair is incomplete
+    assert bridge.codec.stats.lost >= 1
+
+
+def error_frame(err_class: int, data: bytes = b"\x00" * 8) -> can.Message:
+    return can.Message(arbitration_id=err_class, data=data, is_error_frame=True, is_extended_id=False)
+
+
+def test_error_frames_set_the_bus_state_like_linux_reports_it() -> None:
+    assert error_frame_state(error_frame(0x040)) == BusState.BUS_OFF
+    assert error_frame_state(error_frame(0x004, bytes([0, 0x20, 0, 0, 0, 0, 0, 0]))) == BusState.ERROR_PASSIVE
+    assert error_frame_state(error_frame(0x004, bytes([0, 0x04, 0, 0, 0, 0, 0, 0]))) == BusState.ERROR_WARNING
+    assert error_frame_state(error_frame(0x004, bytes([0, 0x40, 0, 0, 0, 0, 0, 0]))) == BusState.ERROR_ACTIVE
+    assert error_frame_state(error_frame(0x100)) == BusState.ERROR_ACTIVE
+    assert error_frame_state(error_frame(0x008)) is None  # a protocol error alone changes no state
+    bridge = BridgeCore(GUARD)
+    bridge.on_command(Command(0.0, 0.0, 10.0, 10.0), 0.0)
+    bridge.on_frame(error_frame(0x040), 0.05)
+    assert bridge.bus_error and bridge.heartbeat_state() == "fault"
+    status = {Codec(DB).decode(f)[0]: Codec(DB).decode(f)[1] for f in bridge.tick(0.05)}  # type: ignore[index]
+    assert status["BRIDGE_STATUS"]["BusState"] == 3 and status["BRIDGE_STATUS"]["BusError"] == 1
+    assert status["BRIDGE_STATUS"]["ErrorFrames"] == 1 and status["BRIDGE_HEARTBEAT"]["State"] == 2
+    bridge.on_frame(error_frame(0x100), 0.1)  # controller restarted
+    assert not bridge.bus_error and bridge.heartbeat_state() == "commanding"
+    assert bridge.health.bus_error is False  # the latch was reported once
+
+
+def test_backoff_doubles_up_to_its_cap_and_resets_after_healthy_traffic() -> None:
+    health = BusHealth(HealthParams(backoff_initial=0.1, backoff_max=0.5, backoff_reset=1.0))
+    waits, t = [], 0.0
+    for _ in range(5):
+        health.on_io_failure("unplugged", t)
+        assert not health.reopen_due(t) and health.fault
+        waits.append(round(health.reopen_at - t, 9))  # type: ignore[operator]
+        t = health.reopen_at  # type: ignore[assignment]
+        assert health.reopen_due(t)
+        health.on_open(t)
+    assert waits == [0.1, 0.2, 0.4, 0.5, 0.5] and health.reopens == 5
+    for k in range(12):
+        health.on_traffic(t + 0.1 * k)
+    health.on_io_failure("again", t + 2.0)
+    assert health.reopen_at == pytest.approx(t + 2.1)
+    with pytest.raises(ParamError, match="backoff_max = 0.05"):
+        HealthParams(backoff_initial=0.1, backoff_max=0.05)
+
+
+def test_bus_link_reopens_a_failed_bus_after_the_backoff() -> None:
+    interface = ["socketcan"]  # no SocketCAN in this kernel: opening really fails
+    health = BusHealth(HealthParams(backoff_initial=0.1, backoff_max=1.0))
+    link = BusLink(lambda: open_bus(interface[0], "moose-test-link"), health)
+    peer = open_bus("virtual", "moose-test-link")
+    frame = Codec(DB).encode("BRIDGE_HEARTBEAT", {"Alive": 1, "State": 0})
+    try:
+        assert not link.send([frame], 0.0)
+        assert health.state == BusState.IO_FAILURE and "open failed" in health.last_error
+        interface[0] = "virtual"
+        assert not link.send([frame], 0.05) and link.bus is None  # still backing off
+        assert link.send([frame], 0.1) and health.state == BusState.ERROR_ACTIVE
+        assert peer.recv(timeout=1.0) is not None
+        link.bus.shutdown()  # type: ignore[union-attr]  # the interface goes away under the link
+        assert not link.send([frame], 0.2) and link.bus is None and "send failed" in health.last_error
+        assert link.receive(0.25) == [] and link.bus is None  # back-off 0.2 s after the second failure
+        peer.send(Codec(DB).encode("EPS_STATUS", {"SteerAngle": 0.1}))
+        assert link.receive(0.4) == [] and link.bus is not None  # re-opened (frames sent before are gone)
+        peer.send(Codec(DB).encode("EPS_STATUS", {"SteerAngle": 0.1}))
+        assert len(link.receive(0.41)) == 1 and health.reopens == 2
+    finally:
+        link.close()
+        peer.shutdown()
+
+
+def test_ecu_saturates_sensors_and_skips_non_finite_samples() -> None:
+    ecu = VehicleEcu()
+    frames = ecu.frames([ImuSample(0.0, 45.0, -45.0, 3.5), EpsSample(0.0, math.nan)], 0.0)
+    assert len(frames) == 1 and ecu.unsendable == 1
+    decoded = Codec(DB).decode(frames[0])
+    assert decoded is not None and decoded[1]["AccelX"] == pytest.approx(30.0) and decoded[1]["YawRate"] == pytest.approx(3.0)
+    with pytest.raises(TypeError, match="has no frame"):
+        ecu.encode(object(), 0.0)
+    with pytest.raises(ValueError, match="timeout"):
+        VehicleEcu(timeout=0.0)
+
+
+def test_bus_link_logs_every_frame_in_candump_format(tmp_path) -> None:
+    path = tmp_path / "traffic.log"
+    peer = open_bus("virtual", "moose-test-log")
+    codec = Codec(DB)
+    sent = [codec.encode("CMD_TORQUE", {"TorqueRL": float(k), "TorqueRR": -float(k)}, 0.01 * k) for k in range(5)]
+    with can.Logger(str(path)) as logger:
+        link = BusLink(lambda: open_bus("virtual", "moose-test-log"), BusHealth(), logger=logger)
+        try:
+            assert link.send(sent, 0.0)
+            peer.send(codec.encode("EPS_STATUS", {"SteerAngle": -0.05}, 0.2))
+            assert len(link.receive(0.2)) == 1
+        finally:
+            link.close()
+            peer.shutdown()
+    lines = path.read_text().splitlines()
+    assert len(lines) == 6 and lines[0].split()[2].startswith("101#")  # candump: (time) channel id#data
+    replayed = list(can.LogReader(str(path)))
+    rx = Codec(DB)
+    decoded = [rx.decode(frame) for frame in replayed]
+    assert [d[1]["TorqueRL"] for d in decoded[:5]] == pytest.approx([0.0, 1.0, 2.0, 3.0, 4.0])  # type: ignore[index]
+    assert decoded[5] is not None and decoded[5][0] == "EPS_STATUS"
+
+
+def test_a_node_does_not_decode_frames_it_transmits_itself() -> None:
+    ecu, bridge = VehicleEcu(), BridgeCore(GUARD)
+    status = Codec(DB).encode("EPS_STATUS", {"SteerAngle": 0.1})
+    for _ in range(2):  # the same counter twice would be a sequence error if the ECU decoded its own identifier
+        ecu.on_frame(status, 0.0)
+    assert ecu.codec.stats.own_id == 2 and ecu.codec.stats.bad_counter == 0
+    assert bridge.on_frame(status, 0.0) is not None  # the bridge receives it
+    heartbeat = Codec(DB).encode("BRIDGE_HEARTBEAT", {s.name: 0.0 for s in DB.get_message_by_name("BRIDGE_HEARTBEAT").signals
+                                                      if s.name != "Counter"})
+    assert bridge.on_frame(heartbeat, 0.0) is None and bridge.codec.stats.own_id == 1
