@@ -21,6 +21,7 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python bench/bench_mpc.py
 	$(BIN)/python bench/bench_closed_loop.py
+	$(BIN)/python bench/bench_plant.py
 	$(BIN)/python bench/bench_graph.py
 
 clean:
