@@ -29,6 +29,7 @@ is reported once with ``log_error``: such endpoints never exchange data.
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import os
@@ -181,7 +182,7 @@ class Publisher:
 
 
 class _NodeBase:
-    """Parameters and logging shared by both backends."""
+    """Parameters, logging and the spin/shutdown life cycle shared by both backends."""
 
     def __init__(self, name: str, params_file: Optional[str], overrides: dict[str, Any],
                  namespace: Optional[str]) -> None:
@@ -197,6 +198,42 @@ class _NodeBase:
                 target = target.setdefault(group, {})
             target[leaf] = value
         self.use_sim_time = self._sim_time_flag(self._params.get("use_sim_time", False))
+        self._stop = threading.Event()
+        self._closed = False
+        self._spinning = False
+
+    # -- life cycle ----------------------------------------------------------------
+
+    @contextlib.contextmanager
+    def _running(self) -> Any:
+        """Mark the node as spinning; release it on the way out if ``shutdown`` was asked meanwhile."""
+        self._spinning = True
+        try:
+            yield
+        finally:
+            self._spinning = False
+        if self._stop.is_set():
+            self._close()
+
+    def shutdown(self) -> None:
+        """Stop spinning (also from a callback or another thread) and release the node's entities."""
+        self._stop.set()
+        if not self._closed:
+            self._wake()
+        if not self._spinning:
+            self._close()
+
+    def _close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        self._release()
+
+    def _wake(self) -> None:
+        """Interrupt a blocking wait of the executor (backends that wait without a timeout)."""
+
+    def _release(self) -> None:
+        raise NotImplementedError
 
     @staticmethod
     def _sim_time_flag(value: Any) -> bool:
@@ -311,9 +348,6 @@ class DdsNode(_NodeBase):
         self._readers: list[_Reader] = []
         self._writers: list[Any] = []
         self._timers: list[_Timer] = []
-        self._stop = threading.Event()
-        self._closed = False
-        self._spinning = False
         self._reported: set[tuple[str, str, str]] = set()
         self._sim_now: Optional[float] = None
         self._discovery = []
@@ -549,41 +583,24 @@ class DdsNode(_NodeBase):
     def spin_once(self, timeout: float) -> None:
         """Run callbacks and timers for ``timeout`` seconds (returns early on ``shutdown``)."""
         deadline = time.monotonic() + timeout
-        self._spinning = True
-        try:
+        with self._running():
             while not self._stop.is_set():
                 remaining = deadline - time.monotonic()
                 self._execute(self._wait_time(max(remaining, 0.0)))
                 if remaining <= 0:
                     break
-        finally:
-            self._spinning = False
-        if self._stop.is_set():
-            self._close()
 
     def spin(self, until: Optional[Callable[[], bool]] = None) -> None:
         """Run callbacks and timers until ``shutdown()`` or ``until()`` is true (checked at least every 0.1 s)."""
-        self._spinning = True
-        try:
+        with self._running():
             while not self._stop.is_set() and not (until and until()):
                 self._execute(self._wait_time(0.1))
-        finally:
-            self._spinning = False
-        if self._stop.is_set():
-            self._close()
 
-    def shutdown(self) -> None:
-        """Stop spinning (also from a callback or another thread) and delete the DDS entities."""
-        self._stop.set()
-        if not self._closed:
-            self._guard.set(True)
-        if not self._spinning:
-            self._close()
+    def _wake(self) -> None:
+        self._guard.set(True)
 
-    def _close(self) -> None:
-        if self._closed:
-            return
-        self._closed = True
+    def _release(self) -> None:
+        """Delete the DDS entities."""
         participant = self.participant
         # deleting the participant deletes its readers, writers, topics and waitset in Cyclone DDS
         participant.__del__()
@@ -648,9 +665,6 @@ class RclpyNode(_NodeBase):
         self.use_sim_time = bool(self.node.get_parameter("use_sim_time").value)
         self._executor = SingleThreadedExecutor()
         self._executor.add_node(self.node)
-        self._stop = False
-        self._spinning = False
-        self._closed = False
 
     @staticmethod
     def _class(type_name: str) -> Any:
@@ -739,41 +753,25 @@ class RclpyNode(_NodeBase):
     def spin_once(self, timeout: float) -> None:
         """Run callbacks and timers for ``timeout`` seconds (returns early on ``shutdown``)."""
         deadline = time.monotonic() + timeout
-        self._spinning = True
-        try:
-            while not self._stop and self._rclpy.ok():
+        with self._running():
+            while not self._stop.is_set() and self._rclpy.ok():
                 remaining = deadline - time.monotonic()
                 if remaining <= 0:
                     break
                 self._executor.spin_once(timeout_sec=min(remaining, 0.1))
-        finally:
-            self._spinning = False
-        if self._stop:
-            self._close()
 
     def spin(self, until: Optional[Callable[[], bool]] = None) -> None:
         from rclpy.executors import ExternalShutdownException
 
-        self._spinning = True
-        try:
-            while self._rclpy.ok() and not self._stop and not (until and until()):
-                self._executor.spin_once(timeout_sec=0.1)
-        except ExternalShutdownException:
-            pass
-        finally:
-            self._spinning = False
-        if self._stop:
-            self._close()
+        with self._running():
+            try:
+                while self._rclpy.ok() and not self._stop.is_set() and not (until and until()):
+                    self._executor.spin_once(timeout_sec=0.1)
+            except ExternalShutdownException:
+                pass
 
-    def shutdown(self) -> None:
-        self._stop = True
-        if not self._spinning:
-            self._close()
-
-    def _close(self) -> None:
-        if self._closed:
-            return
-        self._closed = True
+    def _release(self) -> None:
+        """Destroy the node and its executor (and the rclpy context if this node created it)."""
         self._executor.remove_node(self.node)
         self._executor.shutdown()
         self.node.destroy_node()
