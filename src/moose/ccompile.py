@@ -16,7 +16,7 @@ import shutil
 import subprocess
 import tempfile
 from pathlib import Path
-from typing import Optional
+from typing import Optional, Sequence
 
 import casadi as ca
 import numpy as np
@@ -59,16 +59,20 @@ class CompiledFunction:
         return [r.copy() for r in self._outputs]
 
 
-def compile_function(fn: ca.Function) -> Optional[CompiledFunction]:
-    """Compiled version of ``fn``, or ``None`` when no C compiler works here."""
+def compile_library(name: str, functions: Sequence[ca.Function], source: str = "") -> Optional[ctypes.CDLL]:
+    """The generated C of ``functions`` followed by ``source``, compiled once per machine and loaded.
+
+    ``source`` is C that may call the generated functions.  ``None`` when no C compiler works here.
+    """
     compiler = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
     if compiler is None:
         return None
-    generator = ca.CodeGenerator(f"{fn.name()}.c", {"with_header": False})
-    generator.add(fn)
-    text = generator.dump()
+    generator = ca.CodeGenerator(f"{name}.c", {"with_header": False})
+    for fn in functions:
+        generator.add(fn)
+    text = generator.dump() + source
     digest = hashlib.sha256((text + ca.__version__).encode()).hexdigest()[:16]
-    target = cache_dir() / f"{fn.name()}_{digest}.so"
+    target = cache_dir() / f"{name}_{digest}.so"
     if not target.exists():
         target.parent.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
@@ -76,9 +80,15 @@ def compile_function(fn: ca.Function) -> Optional[CompiledFunction]:
             c_file.write_text(text)
             built = Path(tmp) / "f.so"
             try:
-                subprocess.run([compiler, "-O2", "-shared", "-fPIC", str(c_file), "-o", str(built)],
+                subprocess.run([compiler, "-O2", "-shared", "-fPIC", str(c_file), "-o", str(built), "-lm"],
                                check=True, capture_output=True, timeout=120)
             except (OSError, subprocess.SubprocessError):
                 return None
             os.replace(built, target)
-    return CompiledFunction(ctypes.CDLL(str(target)), fn)
+    return ctypes.CDLL(str(target))
+
+
+def compile_function(fn: ca.Function) -> Optional[CompiledFunction]:
+    """Compiled version of ``fn``, or ``None`` when no C compiler works here."""
+    library = compile_library(fn.name(), [fn])
+    return CompiledFunction(library, fn) if library is not None else None

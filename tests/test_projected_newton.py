@@ -1,0 +1,133 @@
+"""Projected Newton solver (moose.projected_newton): box-constrained optima against references,
+negative curvature, caps, statuses, bounds, bad input."""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.optimize import minimize
+
+from moose.params import ParamError
+from moose.projected_newton import NewtonOptions, ProjectedNewton
+
+GENEROUS = NewtonOptions(max_iter=100, max_evals=5000, tol_opt=1e-6, tol_step=1e-12)
+
+
+def quadratic(n: int) -> ProjectedNewton:
+    """½ uᵀ Q u + cᵀ u with Q = A Aᵀ + I/10 and c in the parameters (A row-major, then c)."""
+    u = ca.SX.sym("u", n)
+    p = ca.SX.sym("p", n * n + n)
+    a = ca.reshape(p[: n * n], n, n)
+    q = a @ a.T + 0.1 * ca.SX.eye(n)
+    cost = ca.Function("quadratic", [u, p], [0.5 * ca.dot(u, q @ u) + ca.dot(p[n * n:], u)])
+    return ProjectedNewton(cost, GENEROUS)
+
+
+def reference_minimum(fun, grad, x0: np.ndarray, bounds: list[tuple[float, float]]) -> np.ndarray:
+    return minimize(fun, x0, jac=grad, method="L-BFGS-B", bounds=bounds,
+                    options={"ftol": 1e-15, "gtol": 1e-12, "maxiter": 10_000}).x
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.integers(0, 10_000))
+def test_box_constrained_quadratic_reaches_the_optimum(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    n = 6
+    solver = quadratic(n)
+    a = rng.normal(size=(n, n))
+    c = 3.0 * rng.normal(size=n)
+    q = a @ a.T + 0.1 * np.eye(n)
+    p = np.concatenate([a.ravel(order="F"), c])  # CasADi reshapes column-major
+    result = solver.solve(rng.uniform(-1, 1, n), p)
+    expected = reference_minimum(lambda x: 0.5 * x @ q @ x + c @ x, lambda x: q @ x + c, np.zeros(n),
+                                 [(-1.0, 1.0)] * n)
+    assert result.status in ("converged", "small_step")
+    np.testing.assert_allclose(result.u, expected, atol=1e-4)
+    assert result.f == pytest.approx(0.5 * result.u @ q @ result.u + c @ result.u, rel=1e-12, abs=1e-12)
+    assert result.iterations <= 2 * n  # Newton on a quadratic: one step per change of the active set
+
+
+def rosenbrock(options: NewtonOptions = GENEROUS) -> ProjectedNewton:
+    u = ca.SX.sym("u", 2)
+    p = ca.SX.sym("p", 1)
+    return ProjectedNewton(ca.Function("rosenbrock", [u, p], [(1 - u[0]) ** 2 + p[0] * (u[1] - u[0] ** 2) ** 2]),
+                           options)
+
+
+def test_rosenbrock_inside_and_on_the_bounds() -> None:
+    solver = rosenbrock()
+    inside = solver.solve(np.array([-1.2, 1.0]), np.array([100.0]), lb=np.array([-2.0, -2.0]), ub=2.0)
+    np.testing.assert_allclose(inside.u, [1.0, 1.0], atol=1e-5)  # Rosenbrock's valley is not convex
+    assert inside.status in ("converged", "small_step") and inside.f < 1e-9
+    bounded = solver.solve(np.array([-1.2, 1.0]), np.array([100.0]), lb=-2.0, ub=np.array([0.5, 2.0]))
+    np.testing.assert_allclose(bounded.u, [0.5, 0.25], atol=1e-5)  # u₀ on its bound, u₁ = u₀²
+    assert bounded.optimality <= 1e-6
+
+
+def test_negative_curvature_is_followed_to_the_bound() -> None:
+    """−u₀² + u₁²: a saddle at 0; from u₀ slightly positive the minimum on the box is u₀ = 1."""
+    u = ca.SX.sym("u", 2)
+    p = ca.SX.sym("p", 1)
+    solver = ProjectedNewton(ca.Function("saddle", [u, p], [-u[0] ** 2 + u[1] ** 2]), GENEROUS)
+    result = solver.solve(np.array([1e-3, 0.5]), np.zeros(1))
+    np.testing.assert_allclose(result.u, [1.0, 0.0], atol=1e-9)
+    assert result.f == pytest.approx(-1.0) and result.f < result.f_start
+
+
+def test_caps_and_statuses() -> None:
+    start, p = np.array([-1.2, 1.0]), np.array([100.0])
+    capped = rosenbrock(NewtonOptions(max_iter=2, max_evals=100)).solve(start, p, lb=-2.0, ub=2.0)
+    assert capped.status == "max_iter" and capped.iterations == 2
+    assert capped.f < capped.f_start
+    evals = rosenbrock(NewtonOptions(max_iter=50, max_evals=4)).solve(start, p, lb=-2.0, ub=2.0)
+    assert evals.status == "max_evals" and evals.evaluations == 4
+    at_optimum = rosenbrock().solve(np.array([1.0, 1.0]), p, lb=-2.0, ub=2.0)
+    assert at_optimum.status == "converged" and at_optimum.iterations == 0 and at_optimum.evaluations == 1
+
+
+def test_every_iteration_decreases_the_cost_within_the_evaluation_cap() -> None:
+    solver = rosenbrock(NewtonOptions(max_iter=10, max_evals=100, max_ls=8))
+    previous = np.inf
+    for k in range(1, 11):
+        solver_k = rosenbrock(NewtonOptions(max_iter=k, max_evals=100, max_ls=8))
+        result = solver_k.solve(np.array([-1.2, 1.0]), np.array([100.0]), lb=-2.0, ub=2.0)
+        assert result.f <= previous and result.evaluations <= 1 + k * 9
+        previous = result.f
+    assert solver.solve(np.array([-1.2, 1.0]), np.array([100.0]), lb=-2.0, ub=2.0).f == previous
+
+
+def test_a_start_where_the_cost_is_not_finite_fails_cleanly() -> None:
+    u = ca.SX.sym("u", 2)
+    p = ca.SX.sym("p", 1)
+    solver = ProjectedNewton(ca.Function("logs", [u, p], [-ca.log(u[0]) - ca.log(u[1])]), GENEROUS)
+    failed = solver.solve(np.array([-0.5, 0.5]), np.zeros(1))
+    assert failed.status == "not_finite" and failed.f == np.inf
+    ok = solver.solve(np.array([0.5, 0.5]), np.zeros(1))  # trials outside the domain are rejected, not taken
+    np.testing.assert_allclose(ok.u, [1.0, 1.0], atol=1e-12)
+    assert np.isfinite(ok.f)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.floats(-5.0, 5.0), min_size=6, max_size=6), st.floats(0.0, 10.0))
+def test_results_stay_inside_the_bounds(start: list[float], scale: float) -> None:
+    u = ca.SX.sym("u", 6)
+    p = ca.SX.sym("p", 1)
+    cost = ca.Function("wavy", [u, p], [ca.sum1(ca.sin(p[0] * u) + 0.1 * (u - 3.0) ** 2)])
+    solver = ProjectedNewton(cost, NewtonOptions())
+    lb, ub = np.array([-1.0, -2.0, 0.0, -0.5, -1.0, 1.0]), np.array([1.0, 0.0, 2.0, 0.5, 3.0, 1.0])
+    result = solver.solve(np.array(start), np.array([scale]), lb, ub)
+    assert np.all(result.u >= lb) and np.all(result.u <= ub) and result.u[5] == 1.0
+    assert result.f <= result.f_start and np.isfinite(result.f)
+
+
+def test_bad_input_is_named() -> None:
+    with pytest.raises(ParamError, match="rho"):
+        NewtonOptions(rho=1.5)
+    with pytest.raises(ParamError, match="max_evals"):
+        NewtonOptions(max_evals=0)
+    with pytest.raises(ParamError, match="regularisation"):
+        NewtonOptions(regularisation=-1.0)
+    with pytest.raises(ValueError, match="lb > ub"):
+        rosenbrock().solve(np.zeros(2), np.array([100.0]), lb=1.0, ub=0.0)
