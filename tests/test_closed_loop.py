@@ -57,22 +57,23 @@ def overreacted(mpc: dict, combined: dict, delta_max: float, ratio: float) -> bo
 
 def test_extreme_case_combined_succeeds_with_every_mpc_solve_capped(config: Config, table: MaxSteeringTable) -> None:
     """Paper, Sec. V-C: in the extreme case the MPC finds no solution within the computational limits and
-    the MSF planner avoids the collision."""
+    the MSF planner avoids the collision.  Every solve of the evasion (τ ≥ 0.5 s: the first second after
+    detection, while the lateral motion is decided) stops at the cap; beside the obstacle the problem
+    becomes easy and some solves converge."""
     scenario = dataclasses.replace(load_scenario("paper_v7_tau1.4"), duration=8.0)
     result = simulate(config, scenario, planner="combined", seed=0, table=table)
     combined = summarize(result)
     assert not combined["collided"] and not combined["left_field"], combined
     under_threat = [r for r in result.planning if r.threat is not None and r.mpc is not None]
     assert len(under_threat) >= 10
-    assert {r.mpc.status for r in under_threat} == {"capped"}
+    evasion = [r for r in under_threat if r.threat.tau >= 0.5]
+    assert len(evasion) >= 4 and {r.mpc.status for r in evasion} == {"capped"}
     assert max(r.blend.weight_mpc for r in under_threat) < 0.05  # the weight function hands over to the MSF
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "contradicts the paper (docs/design.md, 'Where the simulation disagrees'): at the paper's caps the MPC "
-    "alone avoids the obstacle in the extreme case; it saturates the steering but swings out only 1.2x as far "
-    "as the combined planner"))
 def test_extreme_case_mpc_alone_fails_or_overreacts(config: Config, table: MaxSteeringTable) -> None:
+    """Paper, Sec. V-C: where the combined planner passes, the MPC alone at the paper's caps does not find
+    a good manoeuvre: here it saturates the steering and swings out more than 1.3 times as far."""
     combined = run(config, table, "paper_v7_tau1.4", "combined")
     mpc = run(config, table, "paper_v7_tau1.4", "mpc")
     mpc_failed = mpc["collided"] or mpc["left_field"]
@@ -80,14 +81,32 @@ def test_extreme_case_mpc_alone_fails_or_overreacts(config: Config, table: MaxSt
 
 
 @pytest.mark.parametrize("name", ["compare_nu0.26", "compare_nu0.34"])
-def test_comparison_case_mpc_alone_overreacts_where_combined_is_smoother(
+def test_comparison_case_mpc_alone_steers_at_the_limit_and_stays_out(
     config: Config, table: MaxSteeringTable, name: str
 ) -> None:
-    """Paper, Sec. V-D: the MPC alone overreacts with extreme steering; the combined planner avoids the
-    obstacle inside the field limits."""
+    """Paper, Sec. V-D: the MPC alone gives extreme steering commands; the combined planner avoids the
+    obstacle inside the field limits and returns to its lane, the MPC alone stays out (the paper's
+    barrier keeps rewarding distance)."""
     combined = run(config, table, name, "combined")
     mpc = run(config, table, name, "mpc")
     assert not combined["collided"] and not combined["left_field"], combined
+    assert not mpc["collided"], mpc
+    assert mpc["max_abs_steer_rad"] >= 0.95 * config.vehicle.delta_max, mpc
+    assert abs(combined["final_lateral_offset_m"]) < 0.1 * combined["max_lateral_offset_m"], combined
+    assert abs(mpc["final_lateral_offset_m"]) > 0.8 * mpc["max_lateral_offset_m"], mpc
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "contradicts the paper (docs/design.md, 'Where the simulation disagrees'): with the projected Newton "
+    "solver at the paper's caps the MPC alone swings out no further than the combined planner in the "
+    "comparison cases (4.9 vs 4.8 m, 6.1 vs 7.0 m)"))
+@pytest.mark.parametrize("name", ["compare_nu0.26", "compare_nu0.34"])
+def test_comparison_case_mpc_alone_overreacts_where_combined_is_smoother(
+    config: Config, table: MaxSteeringTable, name: str
+) -> None:
+    """Paper, Sec. V-D: the MPC alone overreacts; it swings out further than the combined planner."""
+    combined = run(config, table, name, "combined")
+    mpc = run(config, table, name, "mpc")
     assert overreacted(mpc, combined, config.vehicle.delta_max, 1.05), (mpc, combined)
 
 

@@ -190,24 +190,30 @@ def test_example_eta_steers_at_the_bound_without_braking(eta: tuple[float, float
 # --- receding horizon --------------------------------------------------------------------------
 
 def test_relaxed_case_clears_the_zone_and_returns_to_the_lane() -> None:
-    """v = 5 m/s, zone 25–27 m ahead, w = 2 m, Example emp:eta's first weight set."""
+    """v = 5 m/s, zone 25–27 m ahead, w = 2 m, Example emp:eta's first weight set, every plan
+    solved to convergence (docs/design.md, "MPC": at the paper's caps the capped first plan
+    decides between this manoeuvre and a crawl in front of the zone)."""
     th = threat(w=2.0, x_min=25.0)
-    traj, results = receding_horizon(MpcParams(eta=EQUAL), th, [0.0, 0.0, 5.0, 0.0], 5.0, steps=60)
+    converged = MpcParams(eta=EQUAL, caps=SolverCaps(max_iter=200, max_fun_evals=2000))
+    traj, results = receding_horizon(converged, th, [0.0, 0.0, 5.0, 0.0], 5.0, steps=60)
     beside = (traj[:, 0] >= th.obstacle.x_min) & (traj[:, 0] <= th.obstacle.x_max)
     assert beside.any() and np.all(traj[beside, 1] > th.w)  # the CoG passes outside the danger zone
     assert traj[:, 2].min() > 4.0  # without stopping
     assert traj[-1, 0] > 40.0 and abs(traj[-1, 1]) < 0.2 and traj[-1, 2] == pytest.approx(5.0, abs=0.1)
-    assert all(r.status in ("converged", "capped") for r in results)
+    assert all(r.status == "converged" for r in results)
 
 
-def test_relaxed_case_with_the_default_weights_never_enters_the_zone() -> None:
-    """With η₃ = 0.05 braking is cheap and lowers y_safe: MPC alone may slow down to a crawl
-    in front of the zone (docs/design.md), but it never enters it and never reverses."""
+@pytest.mark.parametrize("eta", [EQUAL, DEFAULT.eta], ids=["equal", "default"])
+def test_relaxed_case_at_the_paper_caps_never_enters_the_zone(eta: tuple[float, float, float, float]) -> None:
+    """At the paper's caps MPC alone may slow down to a crawl in front of the zone instead of
+    passing (η₃ = 0.05 makes braking cheap, and braking lowers y_safe; with the equal weights
+    it depends on the capped first plan: docs/design.md), but it never enters it and never reverses."""
     th = threat(w=2.0, x_min=25.0)
-    traj, _ = receding_horizon(DEFAULT, th, [0.0, 0.0, 5.0, 0.0], 5.0, steps=60)
+    traj, results = receding_horizon(MpcParams(eta=eta), th, [0.0, 0.0, 5.0, 0.0], 5.0, steps=60)
     inside = [th.obstacle.contains(x, y) for x, y in traj[:, :2]]
     assert not any(inside)
     assert traj[:, 2].min() >= 0.0
+    assert all(r.status in ("converged", "capped") for r in results)
 
 
 @pytest.mark.parametrize("params", [DEFAULT, CLIPPED], ids=["paper", "clipped"])
@@ -309,7 +315,8 @@ def test_warm_start_from_the_previous_solution_is_not_worse() -> None:
     assert warm.cost <= cold.cost + 1e-12
 
 
-@pytest.mark.parametrize("change", [dict(solver="sqp_exact"), dict(solver="ipopt"), dict(speed_floor="constraint", qpsol="qpoases")])
+@pytest.mark.parametrize("change", [dict(solver="sqp_lbfgs"), dict(solver="sqp_exact"), dict(solver="ipopt"),
+                                    dict(solver="sqp_lbfgs", speed_floor="constraint", qpsol="qpoases")])
 def test_solver_variants_solve_the_same_problem(change: dict) -> None:
     inp = PlannerInput(0.0, state(), threat(), 7.0, None)
     base = MpcPlanner(DEFAULT, VEHICLE)

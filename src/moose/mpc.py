@@ -34,9 +34,11 @@ Choices where the paper is silent or inconsistent (docs/design.md, "MPC"):
 * J_steer(k+i) uses the input that produces the state k+i, u(k+i−1), normalised.
 * v_X ≥ 0: a quadratic penalty on min(v_X, 0) (bounds-only QPs, fast) or linear
   constraints; either way the returned plan is projected onto v_X ≥ 0.
-* Solver: CasADi ``sqpmethod`` + ``qrqp`` with a BFGS Hessian and a halving line
-  search, chosen by measurement (bench/bench_mpc.py); Table II's caps are
-  :data:`PAPER_CAPS`.
+* Solver: the problem has only the input bounds as constraints, so the default is a
+  projected Newton method with the exact Hessian (:mod:`moose.projected_newton`,
+  compiled C, one call per plan), chosen by measurement against CasADi's
+  ``sqpmethod`` (BFGS or exact Hessian, qrqp or qpOASES), IPOPT and the fmincon
+  stand-in (bench/bench_mpc.py); Table II's caps are :data:`PAPER_CAPS`.
 """
 from __future__ import annotations
 
@@ -50,14 +52,17 @@ import casadi as ca
 import numpy as np
 
 from .params import G, VehicleParams, check, non_negative, positive
+from .projected_newton import NewtonOptions, ProjectedNewton
 from .signals import PlannerInput, PlanResult, PlanStatus
 
-SolverName = Literal["sqp_lbfgs", "sqp_exact", "ipopt"]
-"""``sqp_lbfgs``: sqpmethod with a BFGS Hessian (default); ``sqp_exact``: sqpmethod with the
-exact Hessian, regularised to be positive definite; ``ipopt``: interior point (reference)."""
+SolverName = Literal["projected_newton", "sqp_lbfgs", "sqp_exact", "ipopt"]
+"""``projected_newton``: :mod:`moose.projected_newton`, exact Hessian, compiled C (default);
+``sqp_lbfgs``: CasADi's sqpmethod with a BFGS Hessian; ``sqp_exact``: sqpmethod with the exact
+Hessian, regularised to be positive definite; ``ipopt``: interior point (reference)."""
+SOLVERS: tuple[SolverName, ...] = ("projected_newton", "sqp_lbfgs", "sqp_exact", "ipopt")
 
 QpSolverName = Literal["qrqp", "qpoases"]
-"""QP solver of ``sqpmethod``."""
+"""QP solver of ``sqpmethod`` (the other solvers ignore it)."""
 
 BarrierName = Literal["paper", "clipped"]
 """``paper``: J_safe = −log d, which keeps rewarding distance from y_safe; ``clipped``: 0 beyond a clearance."""
@@ -125,18 +130,22 @@ class MpcParams:
     caps: SolverCaps = PAPER_CAPS
     """Stopping criteria (Table II)."""
     max_iter_ls: int = 8
-    """Line-search iterations per SQP iteration (each evaluates the cost once)."""
-    ls_beta: float = 0.5
-    """Line-search backtracking factor."""
+    """Backtracking steps per iteration (each evaluates the cost once)."""
+    ls_beta: float = 0.3
+    """Line-search backtracking factor (0.5 left line searches without decrease on the benchmark's
+    problems with ``projected_newton``)."""
+    active_set_tol: float = 0.1
+    """ε of ``projected_newton``'s ε-active set (normalised inputs): an input this close to its bound,
+    the gradient pushing outward, is held there for the Newton step."""
     time_budget_s: float = 0.2
     """Wall-clock budget of one plan (s), one planning period; above it the status is ``over_budget``."""
-    solver: SolverName = "sqp_lbfgs"
+    solver: SolverName = "projected_newton"
     """NLP solver (docs/design.md, "MPC": chosen by bench/bench_mpc.py)."""
     qpsol: QpSolverName = "qrqp"
     """QP solver of ``sqpmethod``."""
     speed_floor: SpeedFloor = "penalty"
     """How v_X ≥ 0 enters the NLP; the returned plan is projected onto v_X ≥ 0 either way.
-    ``constraint`` (linear constraints on the inputs) needs ``qpsol = qpoases`` or IPOPT."""
+    ``constraint`` (linear constraints on the inputs) needs sqpmethod with ``qpsol = qpoases``, or IPOPT."""
     v_reg: float = 0.5
     """Speed regularising |v_Y / v_X| and √(w v_X²) at v_X → 0 (m/s)."""
     abs_eps: float = 0.05
@@ -145,7 +154,7 @@ class MpcParams:
     def __post_init__(self) -> None:
         check("N_p", self.N_p, lambda v: isinstance(v, int) and 1 <= v <= 100, "an integer in [1, 100]")
         for name in ("t_s", "a_x_max", "a_y_max", "mu", "barrier_margin", "pass_margin", "time_budget_s",
-                     "v_reg", "abs_eps"):
+                     "v_reg", "abs_eps", "active_set_tol"):
             check(name, getattr(self, name), positive, "a positive number")
         for name in ("eta_return", "reverse_penalty"):
             check(name, getattr(self, name), non_negative, "a non-negative number")
@@ -155,13 +164,13 @@ class MpcParams:
         check("eta", self.eta, lambda e: len(e) == 4 and all(0.0 <= v <= 1.0 for v in e) and abs(sum(e) - 1.0) < 1e-9,
               "a convex combination: four weights in [0, 1] summing to 1")
         check("ls_beta", self.ls_beta, lambda v: 0.0 < v < 1.0, "a factor in (0, 1)")
-        check("solver", self.solver, lambda v: v in ("sqp_lbfgs", "sqp_exact", "ipopt"),
-              "one of sqp_lbfgs, sqp_exact, ipopt")
+        check("solver", self.solver, lambda v: v in SOLVERS, "one of " + ", ".join(SOLVERS))
         check("qpsol", self.qpsol, lambda v: v in ("qrqp", "qpoases"), "qrqp or qpoases")
         check("speed_floor", self.speed_floor, lambda v: v in ("penalty", "constraint"), "penalty or constraint")
-        check("speed_floor", self.speed_floor, lambda v: v == "penalty" or self.qpsol == "qpoases" or self.solver == "ipopt",
-              "penalty with qrqp (qrqp stalls on the linear speed constraints: 220 ms measured); "
-              "constraint needs qpsol = qpoases or solver = ipopt")
+        check("speed_floor", self.speed_floor,
+              lambda v: v == "penalty" or self.solver == "ipopt" or (self.solver.startswith("sqp") and self.qpsol == "qpoases"),
+              "penalty with projected_newton (bounds only) or with qrqp (qrqp stalls on the linear speed "
+              "constraints: 220 ms measured); constraint needs an sqp solver with qpsol = qpoases, or solver = ipopt")
         check("max_iter_ls", self.max_iter_ls,
               lambda v: isinstance(v, int) and v >= 0 and self.caps.max_iter * (1 + v) + 1 <= self.caps.max_fun_evals,
               "an integer ≥ 0 with max_iter (1 + max_iter_ls) + 1 ≤ caps.max_fun_evals "
@@ -341,9 +350,17 @@ def _solver_options(params: MpcParams) -> tuple[str, dict[str, Any]]:
     return "sqpmethod", options
 
 
+def _newton_options(params: MpcParams) -> NewtonOptions:
+    caps = params.caps
+    return NewtonOptions(max_iter=caps.max_iter, max_evals=caps.max_fun_evals, max_ls=params.max_iter_ls,
+                         rho=params.ls_beta, eps_active=params.active_set_tol, tol_opt=caps.optimality_tol,
+                         tol_step=caps.step_tol)
+
+
 @dataclasses.dataclass(frozen=True)
 class _Nlp:
     solver: Any
+    """A :class:`ProjectedNewton`, or a CasADi ``nlpsol``."""
     cost: Any
     n_g: int
 
@@ -354,13 +371,16 @@ def _build(params: MpcParams) -> _Nlp:
     u = ca.SX.sym("u", 2 * params.N_p)
     p = ca.SX.sym("p", len(PARAMETERS))
     cost, speeds = _cost_expression(params, u, p)
+    cost_fn = ca.Function("mpc_cost", [u, p], [cost])
+    if params.solver == "projected_newton":
+        return _Nlp(ProjectedNewton(cost_fn, _newton_options(params)), cost_fn, 0)
     nlp: dict[str, Any] = {"x": u, "p": p, "f": cost}
     n_g = 0
     if params.speed_floor == "constraint":
         nlp["g"] = ca.vertcat(*speeds)
         n_g = params.N_p
     plugin, options = _solver_options(params)
-    return _Nlp(ca.nlpsol("mpc", plugin, nlp, options), ca.Function("mpc_cost", [u, p], [cost]), n_g)
+    return _Nlp(ca.nlpsol("mpc", plugin, nlp, options), cost_fn, n_g)
 
 
 def speed_floor(vX0: float, params: MpcParams) -> np.ndarray:
@@ -375,6 +395,8 @@ def keep_speed_non_negative(u: np.ndarray, vX0: float, params: MpcParams) -> np.
     if not math.isfinite(vX0):
         return out
     floor = speed_floor(vX0, params)
+    if np.all(vX0 + np.cumsum(out[:, 0]) * (params.t_s * params.a_x_max) >= floor):
+        return out  # nothing to raise (the common case)
     v = vX0
     for k in range(params.N_p):
         if v + params.t_s * out[k, 0] * params.a_x_max < floor[k]:
@@ -384,6 +406,10 @@ def keep_speed_non_negative(u: np.ndarray, vX0: float, params: MpcParams) -> np.
 
 
 _CAPPED = ("Maximum_Iterations_Exceeded", "Maximum_Iterations_Reached")
+_NEWTON_STATUS: dict[str, PlanStatus] = {
+    "converged": "converged", "small_step": "converged",  # step below step_tol: fmincon's exit flag 2
+    "max_iter": "capped", "max_evals": "capped", "line_search": "capped",  # a limit of Table II or the search
+    "not_finite": "failed"}
 
 
 class MpcPlanner:
@@ -434,8 +460,14 @@ class MpcPlanner:
 
     def cost(self, inp: PlannerInput, u_normalised: np.ndarray) -> float:
         """𝒥 of eq. (jcaldef) (with the lane-keeping and speed-floor terms) for normalised (N_p, 2) inputs."""
-        u = np.asarray(u_normalised, dtype=float).reshape(-1)
-        return float(self._nlp.cost(u, self.parameters(inp)))
+        return self._cost(np.asarray(u_normalised, dtype=float).reshape(-1), self.parameters(inp))
+
+    def _cost(self, u: np.ndarray, p: np.ndarray) -> float:
+        """𝒥 at flat normalised inputs: compiled with ``projected_newton``, else CasADi's virtual machine."""
+        solver = self._nlp.solver
+        if isinstance(solver, ProjectedNewton):
+            return solver.cost(u, p)
+        return float(self._nlp.cost(u, p))
 
     def plan(self, inp: PlannerInput) -> PlanResult:
         """Solve eq. (planmpc) at one planning instant, from :meth:`initial_guess`.
@@ -453,12 +485,11 @@ class MpcPlanner:
         iterations = 0
         solution, cost = guess, math.inf
         if np.all(np.isfinite(p)):
-            status, iterations, candidate, f = self._solve(guess, p)
+            status, iterations, candidate, f, f_start = self._solve(guess, p)
             if status != "failed":
                 solution = keep_speed_non_negative(np.clip(candidate, -1.0, 1.0), p[2], prm)
                 if not np.array_equal(solution, candidate):
-                    f = float(self._nlp.cost(solution.ravel(), p))
-                f_start = float(self._nlp.cost(guess.ravel(), p))
+                    f = self._cost(solution.ravel(), p)
                 solution, cost = (guess, f_start) if f_start < f else (solution, f)
         elapsed = time.perf_counter() - start
         if status != "failed" and elapsed > prm.time_budget_s:
@@ -470,23 +501,30 @@ class MpcPlanner:
         return PlanResult(accel=accel, status=status, iterations=iterations, solve_time_s=elapsed, cost=cost,
                           predicted=kinematic_rollout(state, accel, prm.t_s))
 
-    def _solve(self, guess: np.ndarray, p: np.ndarray) -> tuple[PlanStatus, int, np.ndarray, float]:
-        """One NLP solve: (status, iterations, normalised (N_p, 2) inputs, cost)."""
+    def _solve(self, guess: np.ndarray, p: np.ndarray) -> tuple[PlanStatus, int, np.ndarray, float, float]:
+        """One NLP solve: (status, iterations, normalised (N_p, 2) inputs, cost, cost at the guess)."""
+        solver = self._nlp.solver
+        if isinstance(solver, ProjectedNewton):
+            result = solver.solve(guess.ravel(), p)
+            status = _NEWTON_STATUS[result.status]
+            if status == "failed":
+                return status, result.iterations, guess, math.inf, math.inf
+            return status, result.iterations, result.u.reshape(self.params.N_p, 2), result.f, result.f_start
         args: dict[str, Any] = {"x0": guess.ravel(), "p": p, "lbx": -1.0, "ubx": 1.0}
         if self._nlp.n_g:
             args["lbg"] = speed_floor(p[2], self.params)
             args["ubg"] = math.inf
         try:
-            sol = self._nlp.solver(**args)
-            stats = self._nlp.solver.stats()
+            sol = solver(**args)
+            stats = solver.stats()
         except RuntimeError:  # solver error, or CasADi could not report its statistics
-            return "failed", 0, guess, math.inf
+            return "failed", 0, guess, math.inf, math.inf
         iterations = int(stats.get("iter_count", 0))
         candidate = np.asarray(sol["x"], dtype=float).reshape(self.params.N_p, 2)
         f = float(sol["f"])
         if not (np.all(np.isfinite(candidate)) and math.isfinite(f)):
-            return "failed", iterations, guess, math.inf
-        return self._status(stats), iterations, candidate, f
+            return "failed", iterations, guess, math.inf, math.inf
+        return self._status(stats), iterations, candidate, f, self._cost(guess.ravel(), p)
 
     @staticmethod
     def _status(stats: dict[str, Any]) -> PlanStatus:
