@@ -15,6 +15,7 @@ from moose.mpc import (
     kinematic_rollout, past_obstacle, y_safe,
 )
 from moose.params import G, ParamError, VehicleParams
+from moose.projected_newton import CompilerMissing
 from moose.signals import Obstacle, PlannerInput, StateEstimate, Threat
 
 VEHICLE = VehicleParams()
@@ -330,6 +331,15 @@ def test_problem_is_built_once() -> None:
     a, b = MpcPlanner(DEFAULT, VEHICLE), MpcPlanner(MpcParams(), VEHICLE)
     assert a._nlp is b._nlp  # same parameter set: one NLP, parametric in the planning inputs
     assert PAPER_CAPS == SolverCaps(10, 100, 1e-3, 1e-3, 1e-3)
+
+
+def test_without_a_c_compiler_the_default_solver_names_the_way_out(tmp_path, monkeypatch) -> None:
+    monkeypatch.setenv("MOOSE_CACHE_DIR", str(tmp_path))  # nothing cached: the library must be built
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
+    with pytest.raises(CompilerMissing, match="mpc.solver.*sqp_lbfgs"):
+        MpcPlanner(MpcParams(eta_return=0.125), VEHICLE)  # a parameter set not built before
+    assert MpcPlanner(MpcParams(eta_return=0.125, solver="sqp_lbfgs"), VEHICLE).plan(
+        PlannerInput(0.0, state(), threat(), 7.0, None)).status in ("converged", "capped")
 
 
 def test_parameters_are_validated() -> None:

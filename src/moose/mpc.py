@@ -52,7 +52,7 @@ import casadi as ca
 import numpy as np
 
 from .params import G, VehicleParams, check, non_negative, positive
-from .projected_newton import NewtonOptions, ProjectedNewton
+from .projected_newton import CompilerMissing, NewtonOptions, ProjectedNewton
 from .signals import PlannerInput, PlanResult, PlanStatus
 
 SolverName = Literal["projected_newton", "sqp_lbfgs", "sqp_exact", "ipopt"]
@@ -373,7 +373,11 @@ def _build(params: MpcParams) -> _Nlp:
     cost, speeds = _cost_expression(params, u, p)
     cost_fn = ca.Function("mpc_cost", [u, p], [cost])
     if params.solver == "projected_newton":
-        return _Nlp(ProjectedNewton(cost_fn, _newton_options(params)), cost_fn, 0)
+        try:
+            return _Nlp(ProjectedNewton(cost_fn, _newton_options(params)), cost_fn, 0)
+        except CompilerMissing as error:
+            raise CompilerMissing(f"mpc.solver = projected_newton: {error}; or set mpc.solver to sqp_lbfgs, "
+                                  "which runs in CasADi's virtual machine") from error
     nlp: dict[str, Any] = {"x": u, "p": p, "f": cost}
     n_g = 0
     if params.speed_floor == "constraint":
