@@ -66,6 +66,13 @@ def test_rosenbrock_inside_and_on_the_bounds() -> None:
     assert bounded.optimality <= 1e-6
 
 
+def test_an_mx_cost_is_expanded() -> None:
+    u = ca.MX.sym("u", 2)
+    p = ca.MX.sym("p", 2)
+    solver = ProjectedNewton(ca.Function("mx_cost", [u, p], [ca.sumsqr(u - p)]), GENEROUS)
+    np.testing.assert_allclose(solver.solve(np.zeros(2), np.array([0.5, 3.0])).u, [0.5, 1.0], atol=1e-9)
+
+
 def test_negative_curvature_is_followed_to_the_bound() -> None:
     """−u₀² + u₁²: a saddle at 0; from u₀ slightly positive the minimum on the box is u₀ = 1."""
     u = ca.SX.sym("u", 2)

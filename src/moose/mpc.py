@@ -174,7 +174,7 @@ class MpcParams:
         check("max_iter_ls", self.max_iter_ls,
               lambda v: isinstance(v, int) and v >= 0 and self.caps.max_iter * (1 + v) + 1 <= self.caps.max_fun_evals,
               "an integer ≥ 0 with max_iter (1 + max_iter_ls) + 1 ≤ caps.max_fun_evals "
-              "(an SQP iteration evaluates the cost at most 1 + max_iter_ls times)")
+              "(an iteration evaluates the cost at most 1 + max_iter_ls times)")
 
     @property
     def epsilon(self) -> float:

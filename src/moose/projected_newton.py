@@ -96,10 +96,12 @@ class CompilerMissing(RuntimeError):
 
 
 class ProjectedNewton:
-    """The solver for one cost function ``cost(u, p) → f`` (CasADi, SX-expandable, u and p dense vectors)."""
+    """The solver for one cost function ``cost(u, p) → f`` (CasADi, SX or expandable MX; u and p dense vectors)."""
 
     def __init__(self, cost: ca.Function, options: NewtonOptions = NewtonOptions()) -> None:
         self.options = options
+        if cost.is_a("MXFunction"):
+            cost = cost.expand()  # the derivatives are generated as SX expressions
         self.n = cost.nnz_in(0)
         self.n_p = cost.nnz_in(1)
         u = ca.SX.sym("u", self.n)
