@@ -396,17 +396,29 @@ def speed_floor(vX0: float, params: MpcParams) -> np.ndarray:
 def keep_speed_non_negative(u: np.ndarray, vX0: float, params: MpcParams) -> np.ndarray:
     """Normalised (N_p, 2) inputs with each v̇_X raised just enough that v_X stays above :func:`speed_floor`."""
     out = np.array(u, dtype=float)
-    if not math.isfinite(vX0):
-        return out
-    floor = speed_floor(vX0, params)
-    if np.all(vX0 + np.cumsum(out[:, 0]) * (params.t_s * params.a_x_max) >= floor):
-        return out  # nothing to raise (the common case)
-    v = vX0
-    for k in range(params.N_p):
-        if v + params.t_s * out[k, 0] * params.a_x_max < floor[k]:
-            out[k, 0] = min((floor[k] - v) / (params.t_s * params.a_x_max), 1.0)
-        v += params.t_s * out[k, 0] * params.a_x_max
+    _raise_braking(out, vX0, params)
     return out
+
+
+def _raise_braking(u: np.ndarray, vX0: float, params: MpcParams) -> bool:
+    """:func:`keep_speed_non_negative` in place on normalised (N_p, 2) inputs; True if an input was raised.
+
+    A plain loop: on ten floats it is several times faster than NumPy's small-array calls.
+    """
+    if not math.isfinite(vX0):
+        return False
+    gain = params.t_s * params.a_x_max
+    column = u[:, 0].tolist()
+    v, raised = vX0, False
+    for k, uk in enumerate(column):
+        floor = min(0.0, vX0 + (k + 1) * gain)  # speed_floor(vX0, params)[k]
+        if v + gain * uk < floor:
+            uk = column[k] = min((floor - v) / gain, 1.0)
+            raised = True
+        v += gain * uk
+    if raised:
+        u[:, 0] = column
+    return raised
 
 
 _CAPPED = ("Maximum_Iterations_Exceeded", "Maximum_Iterations_Reached")
@@ -491,8 +503,8 @@ class MpcPlanner:
         if np.all(np.isfinite(p)):
             status, iterations, candidate, f, f_start = self._solve(guess, p)
             if status != "failed":
-                solution = keep_speed_non_negative(np.clip(candidate, -1.0, 1.0), p[2], prm)
-                if not np.array_equal(solution, candidate):
+                solution = candidate
+                if _raise_braking(solution, p[2], prm):
                     f = self._cost(solution.ravel(), p)
                 solution, cost = (guess, f_start) if f_start < f else (solution, f)
         elapsed = time.perf_counter() - start
@@ -506,7 +518,8 @@ class MpcPlanner:
                           predicted=kinematic_rollout(state, accel, prm.t_s))
 
     def _solve(self, guess: np.ndarray, p: np.ndarray) -> tuple[PlanStatus, int, np.ndarray, float, float]:
-        """One NLP solve: (status, iterations, normalised (N_p, 2) inputs, cost, cost at the guess)."""
+        """One NLP solve: (status, iterations, normalised (N_p, 2) inputs within the bounds (a new array),
+        their cost, cost at the guess)."""
         solver = self._nlp.solver
         if isinstance(solver, ProjectedNewton):
             result = solver.solve(guess.ravel(), p)
@@ -528,7 +541,10 @@ class MpcPlanner:
         f = float(sol["f"])
         if not (np.all(np.isfinite(candidate)) and math.isfinite(f)):
             return "failed", iterations, guess, math.inf, math.inf
-        return self._status(stats), iterations, candidate, f, self._cost(guess.ravel(), p)
+        clipped = np.clip(candidate, -1.0, 1.0)  # the QP's bounds hold to its tolerance
+        if not np.array_equal(clipped, candidate):
+            f = self._cost(clipped.ravel(), p)
+        return self._status(stats), iterations, clipped, f, self._cost(guess.ravel(), p)
 
     @staticmethod
     def _status(stats: dict[str, Any]) -> PlanStatus:
