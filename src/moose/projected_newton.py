@@ -96,7 +96,10 @@ class CompilerMissing(RuntimeError):
 
 
 class ProjectedNewton:
-    """The solver for one cost function ``cost(u, p) → f`` (CasADi, SX or expandable MX; u and p dense vectors)."""
+    """The solver for one cost function ``cost(u, p) → f`` (CasADi, SX or expandable MX; u and p dense vectors).
+
+    One solve at a time per instance: the arguments pass through buffers the instance owns.
+    """
 
     def __init__(self, cost: ca.Function, options: NewtonOptions = NewtonOptions()) -> None:
         self.options = options
