@@ -1,4 +1,4 @@
-"""Compile a CasADi function to C once per machine and call it through ctypes.
+"""Compile a CasADi function (or several, with C that calls them) once per machine; call through ctypes.
 
 A CasADi call from Python costs tens of microseconds of argument conversion,
 more than evaluating the plant itself; the generated C called through ctypes

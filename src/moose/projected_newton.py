@@ -116,8 +116,8 @@ class ProjectedNewton:
         source = f"#define PN_N {self.n}\n" + resources.files(__package__).joinpath("projected_newton.c").read_text()
         library = compile_library(f"pn_{cost.name()}_{self.n}", functions, source)
         if library is None:
-            raise CompilerMissing("the projected Newton solver is compiled C: no working C compiler was found "
-                                  "(set CC, or install gcc)")
+            raise CompilerMissing("the projected Newton solver is compiled C and no working C compiler could "
+                                  "build it (set CC, or install gcc)")
         self._cost = CompiledFunction(library, functions[0])
         self._solve = library.pn_solve
         self._solve.restype = ctypes.c_int
