@@ -410,8 +410,7 @@ def _raise_braking(u: np.ndarray, vX0: float, params: MpcParams) -> bool:
     gain = params.t_s * params.a_x_max
     column = u[:, 0].tolist()
     v, raised = vX0, False
-    for k, uk in enumerate(column):
-        floor = min(0.0, vX0 + (k + 1) * gain)  # speed_floor(vX0, params)[k]
+    for k, (uk, floor) in enumerate(zip(column, speed_floor(vX0, params).tolist())):
         if v + gain * uk < floor:
             uk = column[k] = min((floor - v) / gain, 1.0)
             raised = True
