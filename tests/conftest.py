@@ -6,16 +6,18 @@ from pathlib import Path
 
 import pytest
 
+from isolation import claim_domain
+
 
 @pytest.fixture(scope="session", autouse=True)
 def dds_loopback(tmp_path_factory: pytest.TempPathFactory) -> None:
-    """Unique ROS_DOMAIN_ID per test run; Cyclone DDS bound to the loopback interface."""
+    """A ROS_DOMAIN_ID claimed for this test run (tests/isolation.py); Cyclone DDS bound to the loopback interface."""
     config = tmp_path_factory.mktemp("dds") / "cyclonedds.xml"
     config.write_text(
         '<CycloneDDS><Domain Id="any"><General><Interfaces><NetworkInterface name="lo"/></Interfaces>'
         "<AllowMulticast>spdp</AllowMulticast></General></Domain></CycloneDDS>"
     )
-    os.environ["ROS_DOMAIN_ID"] = str(1 + os.getpid() % 200)
+    os.environ["ROS_DOMAIN_ID"] = str(claim_domain())
     os.environ["CYCLONEDDS_URI"] = config.as_uri()
     os.environ["MOOSE_RUNTIME"] = "dds"
     os.environ.setdefault("MOOSE_CACHE_DIR", str(Path.home() / ".cache" / "moose"))

@@ -11,6 +11,7 @@ import cyclonedds.idl.types as t
 import pytest
 from cyclonedds.core import Policy, Qos
 from cyclonedds.domain import DomainParticipant
+from isolation import claim_udp_port
 from cyclonedds.util import duration
 from cyclonedds.idl import IdlStruct
 from cyclonedds.sub import DataReader
@@ -194,7 +195,7 @@ def test_graph_through_the_can_bridge_and_ecu_emulator_reproduces_the_outcome(tm
     pid = os.getpid()
     summary = launch(scenario, {"scenario": "paper_v7_tau1.4", "can_log": str(log)}, graph="can", out=out,
                      can_params={"can_interface": "udp_multicast", "can_channel": f"239.74.{pid % 250}.{1 + pid % 199}",
-                                 "can_port": 40000 + pid % 20000})
+                                 "can_port": claim_udp_port()})
     assert "[can_bridge]" in out.getvalue()
     assert summary["node_exits"]["vehicle_simulator"] == 0
     assert summary["collided"] is False and summary["left_field"] is False

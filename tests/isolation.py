@@ -1,0 +1,68 @@
+"""Resources a test run claims for itself: a DDS domain id and UDP ports that no other run on this machine uses.
+
+A DDS domain is claimed with an exclusive, non-blocking ``flock`` on a file under the system's
+temporary folder, held for the whole test session (the kernel releases it when the process dies,
+even on SIGKILL), and only if Cyclone DDS's discovery port of that domain (7400 + 250 · id, the
+RTPS well-known port) can be bound on loopback, so a graph left over from another run is noticed.
+UDP ports for the CAN bus are taken from the kernel (bind to port 0) and held by a lock file too,
+so two concurrent runs never share a bus.
+"""
+from __future__ import annotations
+
+import fcntl
+import os
+import socket
+import tempfile
+from pathlib import Path
+from typing import IO
+
+LOCK_DIR = Path(tempfile.gettempdir()) / "moose-test-locks"
+DOMAIN_IDS = range(1, 200)
+"""Cyclone DDS accepts 0..232; 0 is ROS 2's default and is left to users."""
+
+_held: list[IO[str]] = []
+
+
+def _lock(name: str) -> bool:
+    LOCK_DIR.mkdir(parents=True, exist_ok=True)
+    handle = open(LOCK_DIR / name, "w", encoding="utf-8")
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        handle.close()
+        return False
+    handle.write(str(os.getpid()))
+    handle.flush()
+    _held.append(handle)
+    return True
+
+
+def _udp_port_free(port: int) -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 0)
+        try:
+            sock.bind(("127.0.0.1", port))
+        except OSError:
+            return False
+    return True
+
+
+def claim_domain() -> int:
+    """A DDS domain id locked for this process and with its discovery port free; raises if none is left."""
+    start = os.getpid() % len(DOMAIN_IDS)
+    for i in range(len(DOMAIN_IDS)):
+        domain = DOMAIN_IDS[(start + i) % len(DOMAIN_IDS)]
+        if _udp_port_free(7400 + 250 * domain) and _lock(f"dds-domain-{domain}"):
+            return domain
+    raise RuntimeError(f"no free DDS domain in {DOMAIN_IDS}: every one is locked by another test run")
+
+
+def claim_udp_port() -> int:
+    """A UDP port that is free now (the kernel's choice) and locked for this process."""
+    for _ in range(100):
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+            sock.bind(("127.0.0.1", 0))
+            port = int(sock.getsockname()[1])
+        if _lock(f"udp-port-{port}"):
+            return port
+    raise RuntimeError("no free UDP port found")
