@@ -17,12 +17,10 @@ from .motion import MotionParams
 from .mpc import MpcParams
 from .msf import MsfParams
 from .observer import ObserverParams
+from .resources import PARAMETER_FILE
 from .params import ParamError, VehicleParams, build, check, positive, read_ros_params, to_mapping
 from .sensors import SensorParams
 from .weight import WeightParams
-
-CONFIG_FILE = Path(__file__).resolve().parents[2] / "config" / "moose.yaml"
-"""The parameter file of a source checkout."""
 
 PlannerMode = Literal["combined", "mpc", "msf"]
 
@@ -84,11 +82,9 @@ def config_from_mapping(params: Mapping[str, Any], where: str = "parameters") ->
 
 
 def load_config(path: str | Path | None = None, node: str | None = None) -> Config:
-    """Read ``path`` (default ``config/moose.yaml`` when present, else the defaults)."""
+    """Read ``path`` (default: the shipped ``config/moose.yaml``, :data:`moose.resources.PARAMETER_FILE`)."""
     if path is None:
-        if not CONFIG_FILE.is_file():
-            return Config()
-        path = CONFIG_FILE
+        path = PARAMETER_FILE
     return config_from_mapping(read_ros_params(path, node), where=str(Path(path).name))
 
 

@@ -19,10 +19,9 @@ from typing import Any, Optional
 import yaml
 
 from .params import ParamError, build, check, non_negative, positive
+from .resources import SCENARIO_DIR
 from .signals import Obstacle as Box
 
-SCENARIO_DIR = Path(__file__).resolve().parents[2] / "config" / "scenarios"
-"""The scenario folder of a source checkout."""
 
 V_MAX_FIELD = 20.0
 """Highest speed a scenario may ask for (m/s): the campus field's limit is about 7 m/s."""

@@ -27,7 +27,8 @@ from typing import Any, Optional
 import can
 import cantools
 
-DBC_FILE = Path(__file__).resolve().parents[3] / "config" / "kanon.dbc"
+from ..resources import DBC_FILE
+
 PROTECTED = ("CMD_STEER", "CMD_TORQUE")
 """Frames with counter and checksum."""
 CHECKSUM_BYTE = 7

@@ -1,0 +1,19 @@
+"""Data files shipped inside the package (``moose/data``; the repository's ``config/`` links there).
+
+They are found with :mod:`importlib.resources`, so an installed wheel finds them as a source
+checkout does: the default parameter file, the scenarios and the vehicle bus's DBC.
+"""
+from __future__ import annotations
+
+import os
+from importlib.resources import files
+from pathlib import Path
+
+DATA_DIR = Path(os.fspath(files("moose").joinpath("data")))
+"""The package's data folder (pip installs packages unzipped, so it is a real folder)."""
+PARAMETER_FILE = DATA_DIR / "moose.yaml"
+"""The default ROS 2 parameter file."""
+SCENARIO_DIR = DATA_DIR / "scenarios"
+"""The shipped scenarios (the paper's experiments)."""
+DBC_FILE = DATA_DIR / "kanon.dbc"
+"""The FPEV2-Kanon vehicle bus (500 kbit/s)."""
