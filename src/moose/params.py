@@ -48,6 +48,36 @@ def check(name: str, value: Any, predicate: typing.Callable[[Any], bool], what: 
 
 
 @dataclasses.dataclass(frozen=True)
+class VehicleLimits:
+    """Hard limits of the FPEV2-Kanon's actuators: constants of the vehicle, not configuration.
+
+    Configuration may only tighten them (:class:`VehicleParams` refuses a looser value); the
+    plant, the planners, the maneuver table, the motion controller and the CAN bridge's guard
+    all take them from :class:`VehicleParams`, and the DBC's signal ranges must contain them.
+    """
+
+    delta_max: float = 0.3
+    """Steering angle of the road wheels (rad), Table I."""
+    delta_rate_max: float = 1.0
+    """Steering rate of the road wheels (rad/s).  Table I prints 2618 rad/s, which is
+    25 000 rpm: the speed of the EPS's Maxon motor, not of the road wheels.  1 rad/s (full lock
+    0.3 rad in 0.3 s, about a skilled driver's emergency steering input) is our choice for the
+    road wheels; docs/design.md, "Steering rate"."""
+    T_max: float = 200.0
+    """Torque of one rear in-wheel motor (N m), Table I."""
+    torque_rate_max: float = 2000.0
+    """Torque slew rate of one rear motor (N m/s): 0 → T_max in 0.1 s."""
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            check(f"limits.{f.name}", getattr(self, f.name), positive, "a positive number")
+
+
+VEHICLE_LIMITS = VehicleLimits()
+"""The FPEV2-Kanon's hard limits."""
+
+
+@dataclasses.dataclass(frozen=True)
 class VehicleParams:
     """FPEV2-Kanon single-track parameters: Table I of the paper (SI units).
 
@@ -66,12 +96,14 @@ class VehicleParams:
     """CoG to front axle (m)."""
     lr: float = 0.71
     """CoG to rear axle (m)."""
-    T_max: float = 200.0
-    """Maximum torque of one in-wheel motor (N m)."""
-    delta_max: float = 0.3
-    """Maximum steering angle (rad)."""
-    delta_rate_max: float = 2618.0
-    """Maximum steering angular speed (rad/s), Table I as printed."""
+    T_max: float = VEHICLE_LIMITS.T_max
+    """Maximum torque of one in-wheel motor (N m); at most :data:`VEHICLE_LIMITS`."""
+    delta_max: float = VEHICLE_LIMITS.delta_max
+    """Maximum steering angle (rad); at most :data:`VEHICLE_LIMITS`."""
+    delta_rate_max: float = VEHICLE_LIMITS.delta_rate_max
+    """Maximum steering rate of the road wheels (rad/s); at most :data:`VEHICLE_LIMITS`."""
+    torque_rate_max: float = VEHICLE_LIMITS.torque_rate_max
+    """Torque slew rate of one rear motor (N m/s); at most :data:`VEHICLE_LIMITS`."""
     Cx: float = 1.5
     """Longitudinal Pacejka shape factor."""
     Bx: float = 8.0
@@ -92,6 +124,10 @@ class VehicleParams:
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
             check(f"vehicle.{f.name}", getattr(self, f.name), positive, "a positive number")
+        for f in dataclasses.fields(VehicleLimits):
+            limit = getattr(VEHICLE_LIMITS, f.name)
+            check(f"vehicle.{f.name}", getattr(self, f.name), lambda v, limit=limit: v <= limit,
+                  f"at most the vehicle's hard limit {limit:g} (configuration can only tighten it)")
 
     @property
     def wheelbase(self) -> float:
