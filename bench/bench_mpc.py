@@ -35,9 +35,10 @@ from typing import Iterator
 import numpy as np
 from scipy.optimize import minimize
 
-from moose.mpc import PAPER_CAPS, MpcParams, MpcPlanner, SolverCaps, kinematic_rollout
+from moose.mpc import MpcPlanner, kinematic_rollout
 from moose.params import VehicleParams
 from moose.signals import Obstacle, PlannerInput, StateEstimate, Threat
+from moose.schema import MpcParams, PAPER_CAPS, SolverCaps
 
 VEHICLE = VehicleParams()
 STEPS = 20

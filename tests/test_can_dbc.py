@@ -8,13 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from moose.canbus.busload import frame_loads, worst_case_bus_load, worst_case_frame_bits
-from moose.canbus.codec import (
-    PROTECTED,
-    Codec,
-    command_checksum,
-    crc8_j1850,
-    load_database,
-)
+from moose.canbus.codec import PROTECTED, Codec, command_checksum, crc8_j1850, load_database
 from moose.params import VehicleParams
 
 DB = load_database()

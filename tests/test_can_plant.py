@@ -17,18 +17,10 @@ from moose.canbus.codec import default_database
 from moose.canbus.ecu import VehicleEcu
 from moose.canbus.safety import Command, GuardParams
 from moose.params import VehicleParams
-from moose.sensors import SensorParams, Sensors
+from moose.sensors import Sensors
 from moose.signals import EpsSample, GpsSample, ImuSample, WheelSpeedSample
-from moose.vehicle import (
-    DELTA,
-    OMEGA_RL,
-    OMEGA_RR,
-    VX,
-    VehiclePlant,
-    X,
-    Y,
-    initial_state,
-)
+from moose.vehicle import DELTA, OMEGA_RL, OMEGA_RR, VX, VehiclePlant, X, Y, initial_state
+from moose.schema import SensorParams
 
 DT = 0.01
 STOP = 1.2

@@ -37,8 +37,9 @@ import numpy as np
 from moose.canbus.bus import open_bus
 from moose.canbus.ecu import VehicleEcu
 from moose.params import VehicleParams
-from moose.sensors import SensorParams, Sensors
+from moose.sensors import Sensors
 from moose.vehicle import DELTA, VX, VehiclePlant, initial_state
+from moose.schema import SensorParams
 
 group, port, cap = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
 vehicle = VehicleParams()

@@ -1,12 +1,14 @@
 """FBL: round trip through the plant's own lateral dynamics, saturation, symmetry, low speed."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
-from moose.fbl import FblParams, FeedbackLinearization
+from moose.fbl import FeedbackLinearization
+from moose.schema import FblParams
 from moose.params import VehicleParams
 from moose.signals import StateEstimate
 from moose.tire import peak_slip
@@ -30,13 +32,13 @@ def global_acceleration(delta: float, vy: float, gamma: float, theta: float) -> 
 @pytest.mark.parametrize("delta, vy, gamma, theta", [(0.03, 0.1, 0.1, 0.2), (-0.05, -0.2, -0.2, -0.4), (0.08, 0.0, 0.3, 1.0)])
 def test_round_trip_recovers_the_steering_angle(delta: float, vy: float, gamma: float, theta: float) -> None:
     accel, estimate = global_acceleration(delta, vy, gamma, theta)
-    fbl = FeedbackLinearization(FblParams(), P)
+    fbl = FeedbackLinearization(FblParams(), P, 0.2)
     # the plant keeps cos(delta) and the small -F_yf sin(delta) term; the FBL uses eq. (eomdyn)
     assert fbl.reference(accel, estimate).delta == pytest.approx(delta, abs=0.004)
 
 
 def test_saturates_beyond_the_peak_and_at_the_steering_limit() -> None:
-    fbl = FeedbackLinearization(FblParams(), P)
+    fbl = FeedbackLinearization(FblParams(), P, 0.2)
     straight = StateEstimate(0.0, 0.0, 0.0, 0.0, 7.0, 0.0, 0.0, 0.0)
     huge = fbl.reference(np.array([0.0, 50.0]), straight).delta
     assert huge == pytest.approx(min(peak_slip(P.By, P.Cy), P.delta_max))
@@ -44,7 +46,7 @@ def test_saturates_beyond_the_peak_and_at_the_steering_limit() -> None:
 
 
 def test_speed_reference_and_standstill() -> None:
-    fbl = FeedbackLinearization(FblParams(t_s=0.2), P)
+    fbl = FeedbackLinearization(FblParams(), P, 0.2)
     ref = fbl.reference(np.array([2.0, 0.0]), StateEstimate(0.0, 0.0, 0.0, 0.0, 5.0, 0.0, 0.0, 0.0))
     assert ref.vx == pytest.approx(5.4)
     stopped = fbl.reference(np.array([-3.0, 1.0]), StateEstimate(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
@@ -55,7 +57,7 @@ def test_speed_reference_and_standstill() -> None:
 def test_round_trip_at_several_speeds(vx: float) -> None:
     """Straight running, pure lateral request: δ* reproduces the acceleration the plant develops at δ*."""
     plant = VehiclePlant(P)
-    fbl = FeedbackLinearization(FblParams(), P)
+    fbl = FeedbackLinearization(FblParams(), P, 0.2)
     estimate = StateEstimate(0.0, 0.0, 0.0, 0.0, vx, 0.0, 0.0, 0.0)
     for a_y in (0.3, 1.0, 0.95 * P.mu * P.Fzf / P.m):  # at straight running only the front axle pushes
         delta = fbl.reference(np.array([0.0, a_y]), estimate).delta
@@ -67,7 +69,7 @@ def test_round_trip_at_several_speeds(vx: float) -> None:
 
 
 def test_mirror_symmetry() -> None:
-    fbl = FeedbackLinearization(FblParams(), P)
+    fbl = FeedbackLinearization(FblParams(), P, 0.2)
     for (aX, aY), (theta, vy, gamma) in (((0.5, 2.0), (0.3, 0.1, 0.2)), ((-1.0, 4.0), (-0.7, -0.3, 0.4))):
         left = fbl.reference(np.array([aX, aY]), StateEstimate(0.0, 1.0, 2.0, theta, 6.0, vy, gamma, 0.1))
         right = fbl.reference(np.array([aX, -aY]), StateEstimate(0.0, 1.0, -2.0, -theta, 6.0, -vy, -gamma, -0.1))
@@ -77,7 +79,7 @@ def test_mirror_symmetry() -> None:
 
 
 def test_steering_grows_with_the_lateral_request_up_to_the_peak() -> None:
-    fbl = FeedbackLinearization(FblParams(), P)
+    fbl = FeedbackLinearization(FblParams(), P, 0.2)
     estimate = StateEstimate(0.0, 0.0, 0.0, 0.0, 7.0, 0.0, 0.0, 0.0)
     requests = np.linspace(-12.0, 12.0, 97)
     deltas = np.array([fbl.reference(np.array([0.0, a]), estimate).delta for a in requests])
@@ -91,7 +93,7 @@ def test_steering_grows_with_the_lateral_request_up_to_the_peak() -> None:
 
 def test_rotation_to_body_axes() -> None:
     """A global request along the car's own lateral axis is a pure lateral request whatever the heading."""
-    fbl = FeedbackLinearization(FblParams(), P)
+    fbl = FeedbackLinearization(FblParams(), P, 0.2)
     for theta in (0.0, 0.8, -2.0, math.pi):
         estimate = StateEstimate(0.0, 0.0, 0.0, theta, 6.0, 0.0, 0.0, 0.0)
         lateral = 2.0 * np.array([-math.sin(theta), math.cos(theta)])
@@ -103,7 +105,7 @@ def test_rotation_to_body_axes() -> None:
 
 
 def test_finite_near_standstill() -> None:
-    fbl = FeedbackLinearization(FblParams(), P)
+    fbl = FeedbackLinearization(FblParams(), P, 0.2)
     for vx in (-0.5, 0.0, 1e-9, 0.3, 1.0):
         for accel in ((0.0, 3.0), (-2.0, -9.0), (1.0, 0.0)):
             ref = fbl.reference(np.array(accel), StateEstimate(0.0, 0.0, 0.0, 0.0, vx, 0.2, 0.5, 0.0))
@@ -111,8 +113,9 @@ def test_finite_near_standstill() -> None:
             assert math.isfinite(ref.vx) and ref.vx >= 0.0
 
 
-def test_mu_model_changes_the_assumed_tyre() -> None:
+def test_the_vehicles_mu_is_the_assumed_tyre() -> None:
     estimate = StateEstimate(0.0, 0.0, 0.0, 0.0, 7.0, 0.0, 0.0, 0.0)
-    nominal = FeedbackLinearization(FblParams(), P).reference(np.array([0.0, 0.3]), estimate).delta
-    slippery = FeedbackLinearization(FblParams(mu_model=P.mu / 2), P).reference(np.array([0.0, 0.3]), estimate).delta
+    nominal = FeedbackLinearization(FblParams(), P, 0.2).reference(np.array([0.0, 0.3]), estimate).delta
+    slippery_vehicle = dataclasses.replace(P, mu=P.mu / 2)
+    slippery = FeedbackLinearization(FblParams(), slippery_vehicle, 0.2).reference(np.array([0.0, 0.3]), estimate).delta
     assert slippery > nominal * 1.8  # half the cornering stiffness: about twice the slip angle

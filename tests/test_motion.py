@@ -6,10 +6,11 @@ import math
 import numpy as np
 import pytest
 
-from moose.motion import MotionController, MotionParams
+from moose.motion import MotionController
 from moose.params import ParamError, VehicleParams
 from moose.signals import Reference, StateEstimate
 from moose.vehicle import DELTA, VX, VehiclePlant, initial_state
+from moose.schema import MotionParams
 
 P = VehicleParams()
 DT = 0.01
@@ -91,18 +92,19 @@ def test_braking_is_symmetric_to_driving() -> None:
 
 def test_eps_tracks_a_step_with_the_designed_time_constant() -> None:
     k = 20.0
-    log = run(Reference(delta=0.1, vx=5.0), 1.0, params=MotionParams(k_delta=k))
+    step = 0.04  # k * step = 0.8 rad/s: below the rate limit, the loop is linear
+    log = run(Reference(delta=step, vx=5.0), 1.0, params=MotionParams(k_delta=k))
     # the plant integrates the held rate exactly: delta_n = delta* (1 - (1 - k dt)^n)
     n = np.arange(len(log))
-    assert log[:, 2] == pytest.approx(0.1 * (1.0 - (1.0 - k * DT) ** n), abs=1e-12)
+    assert log[:, 2] == pytest.approx(step * (1.0 - (1.0 - k * DT) ** n), abs=1e-12)
     tau = -DT / math.log(1.0 - k * DT)  # 45 ms; 1/k = 50 ms in continuous time
-    t63 = log[np.argmax(log[:, 2] >= 0.1 * (1 - math.exp(-1))), 0]
+    t63 = log[np.argmax(log[:, 2] >= step * (1 - math.exp(-1))), 0]
     assert tau - 1e-9 <= t63 < tau + DT
-    assert log[-1, 2] == pytest.approx(0.1, abs=1e-6)
+    assert log[-1, 2] == pytest.approx(step, abs=1e-6)
 
 
 def test_steering_limits() -> None:
-    limited = run(Reference(delta=1.0, vx=5.0), 0.5)
+    limited = run(Reference(delta=1.0, vx=5.0), 1.0)
     assert np.max(limited[:, 2]) == pytest.approx(P.delta_max, abs=1e-4)
     assert np.max(limited[:, 2]) <= P.delta_max
     slow = VehicleParams(delta_rate_max=0.5)

@@ -11,14 +11,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from moose.mpc import (
-    PAPER_CAPS, MpcParams, MpcPlanner, SolverCaps, epsilon, j_brake, j_safe, j_stable, j_steer,
-    kinematic_rollout, past_obstacle, y_safe,
+    MpcPlanner, epsilon, j_brake, j_safe, j_stable, j_steer, kinematic_rollout, past_obstacle, y_safe,
 )
-from moose.params import G, ParamError, VehicleParams
+from moose.params import G, ParamError
 from moose.projected_newton import CompilerMissing
+from moose.schema import PAPER_CAPS, MpcParams, PlanningGrid, SolverCaps
 from moose.signals import Obstacle, PlannerInput, StateEstimate, Threat
 
-VEHICLE = VehicleParams()
+GRID = PlanningGrid(N_p=10, t_s=0.2, a_x_max=6.0, a_y_max=6.0, mu=0.3)
+"""The kinematic problem of the MPC notes (bounds ±6 m/s², ε at μ = 0.3): these tests are about the optimisation."""
 DEFAULT = MpcParams()
 EQUAL = (0.25, 0.25, 0.25, 0.25)
 
@@ -36,14 +37,14 @@ def state(v: float = 7.0, x: float = 0.0, y: float = 0.0, vy: float = 0.0) -> St
 def receding_horizon(params: MpcParams, th: Threat | None, s0: list[float], v_des: float, steps: int,
                      clear_after: float = 2.0) -> tuple[np.ndarray, list]:
     """Closed loop on the kinematic model: the first input applied, the rest shifted as the next guess."""
-    planner = MpcPlanner(params, VEHICLE)
+    planner = MpcPlanner(params, GRID)
     s = np.array(s0, dtype=float)
     guess = None
     traj, results = [s.copy()], []
     for k in range(steps):
         active = th if th is not None and s[0] < th.obstacle.x_max + clear_after else None
-        result = planner.plan(PlannerInput(k * params.t_s, state(s[2], s[0], s[1], s[3]), active, v_des, guess))
-        s = kinematic_rollout(s, result.accel[:1], params.t_s)[1]
+        result = planner.plan(PlannerInput(k * GRID.t_s, state(s[2], s[0], s[1], s[3]), active, v_des, guess))
+        s = kinematic_rollout(s, result.accel[:1], GRID.t_s)[1]
         traj.append(s.copy())
         results.append(result)
         guess = np.vstack([result.accel[1:], result.accel[-1:]])
@@ -122,15 +123,15 @@ def test_exact_hold_prediction() -> None:
 
 def reference_cost(params: MpcParams, s0: np.ndarray, u: np.ndarray, th: Threat, v_des: float) -> float:
     """𝒥 of eq. (jcaldef) written out from the paper's formulas (NumPy, for one threat)."""
-    p = params
-    eps = 1.0 / math.sqrt(8.8 * p.mu * G)
+    p, g = params, GRID
+    eps = 1.0 / math.sqrt(8.8 * g.mu * G)
     e1, e2, e3, e4 = p.eta
     total = 0.0
     x, y, vx, vy = s0
     for ux, uy in u:
-        ax, ay = ux * p.a_x_max, uy * p.a_y_max
-        x, y = x + p.t_s * vx + 0.5 * p.t_s**2 * ax, y + p.t_s * vy + 0.5 * p.t_s**2 * ay
-        vx, vy = vx + p.t_s * ax, vy + p.t_s * ay
+        ax, ay = ux * g.a_x_max, uy * g.a_y_max
+        x, y = x + g.t_s * vx + 0.5 * g.t_s**2 * ax, y + g.t_s * vy + 0.5 * g.t_s**2 * ay
+        vx, vy = vx + g.t_s * ax, vy + g.t_s * ay
         yt = th.side * (y - th.y_path)
         ys = th.w / (1 + math.exp((th.obstacle.x_min - x - 4 * vx) / (eps * math.sqrt(th.w * (vx**2 + p.v_reg**2)))))
         d, m, c = yt - ys, p.barrier_margin, p.barrier_clearance
@@ -157,7 +158,7 @@ CLIPPED = MpcParams(barrier="clipped")
        st.floats(0.5, 9.0), st.floats(-1.0, 1.0), st.sampled_from([DEFAULT, CLIPPED]))
 def test_cost_is_eq_jcaldef_over_the_predicted_states(u: list[float], side: int, v: float, y: float,
                                                       params: MpcParams) -> None:
-    planner = MpcPlanner(params, VEHICLE)
+    planner = MpcPlanner(params, GRID)
     th = threat(w=2.2, x_min=12.0, side=side, y_path=0.3)
     uu = np.array(u).reshape(10, 2)
     s0 = np.array([1.0, y, v, 0.4])
@@ -176,7 +177,7 @@ def test_example_eta_steers_at_the_bound_without_braking(eta: tuple[float, float
     braking (x_obs − x − 4 v_X ≪ 0), no input reaches it, and both sets steer at the bound;
     braking cannot lower the barrier, so J_brake and J_stable keep the speed.
     """
-    planner = MpcPlanner(MpcParams(N_p=2, eta=eta), VEHICLE)
+    planner = MpcPlanner(MpcParams(eta=eta), dataclasses.replace(GRID, N_p=2))
     inp = PlannerInput(0.0, state(5.0), threat(w=1.0, x_min=1.0), 5.0, None)
     grid = np.linspace(-1.0, 1.0, 81)
     costs = np.array([[planner.cost(inp, [[a, b], [a, b]]) for b in grid] for a in grid])
@@ -237,9 +238,9 @@ def test_extreme_case_evades_to_the_safe_side(params: MpcParams) -> None:
 def test_infeasible_start_has_a_finite_cost_and_steers_away() -> None:
     for side in (1, -1):
         th = threat(w=2.6, x_min=5.0, side=side)  # τ = 0.7 s: y_safe ≈ w over the whole horizon
-        planner = MpcPlanner(DEFAULT, VEHICLE)
+        planner = MpcPlanner(DEFAULT, GRID)
         inp = PlannerInput(0.0, state(7.0), th, 7.0, None)
-        assert y_safe(0.0, 7.0, 5.0, 2.6, DEFAULT.epsilon) > 2.5  # the log is undefined at the start
+        assert y_safe(0.0, 7.0, 5.0, 2.6, epsilon(GRID.mu)) > 2.5  # the log is undefined at the start
         result = planner.plan(inp)
         assert math.isfinite(result.cost) and np.all(np.isfinite(result.accel))
         assert result.status in ("converged", "capped")
@@ -258,37 +259,37 @@ def test_lane_keeping_without_a_threat() -> None:
 
 def test_statuses() -> None:
     inp = PlannerInput(0.0, state(), threat(), 7.0, None)
-    capped = MpcPlanner(MpcParams(caps=SolverCaps(max_iter=1, max_fun_evals=10)), VEHICLE).plan(inp)
+    capped = MpcPlanner(MpcParams(caps=SolverCaps(max_iter=1, max_fun_evals=10)), GRID).plan(inp)
     assert capped.status == "capped" and capped.iterations == 1
     converged = MpcPlanner(MpcParams(caps=SolverCaps(max_iter=200, max_fun_evals=2000), max_iter_ls=8),
-                           VEHICLE).plan(inp)
+                           GRID).plan(inp)
     assert converged.status == "converged" and converged.iterations < 200
-    late = MpcPlanner(MpcParams(time_budget_s=1e-9), VEHICLE).plan(inp)
+    late = MpcPlanner(MpcParams(time_budget_s=1e-9), GRID).plan(inp)
     assert late.status == "over_budget" and np.all(np.isfinite(late.accel))
     for bad in (dataclasses.replace(state(), x=float("nan")), dataclasses.replace(state(), y=float("inf"))):
-        failed = MpcPlanner(DEFAULT, VEHICLE).plan(PlannerInput(0.0, bad, threat(), 7.0, np.full((10, 2), 9.0)))
+        failed = MpcPlanner(DEFAULT, GRID).plan(PlannerInput(0.0, bad, threat(), 7.0, np.full((10, 2), 9.0)))
         assert failed.status == "failed" and failed.cost == math.inf
         assert np.all(np.isfinite(failed.accel)) and np.all(np.isfinite(failed.predicted))
         assert np.all(np.abs(failed.accel) <= 6.0)  # the clipped initial guess
-    nan_guess = MpcPlanner(DEFAULT, VEHICLE).plan(PlannerInput(0.0, state(), threat(), 7.0, np.full((10, 2), np.nan)))
+    nan_guess = MpcPlanner(DEFAULT, GRID).plan(PlannerInput(0.0, state(), threat(), 7.0, np.full((10, 2), np.nan)))
     assert nan_guess.status in ("converged", "capped") and math.isfinite(nan_guess.cost)
 
 
 def test_result_shapes_bounds_and_prediction() -> None:
     for n_p in (2, 10, 20):
-        params = MpcParams(N_p=n_p)
-        result = MpcPlanner(params, VEHICLE).plan(PlannerInput(0.0, state(), threat(), 7.0, np.zeros((3, 2))))
+        params, grid = DEFAULT, dataclasses.replace(GRID, N_p=n_p)
+        result = MpcPlanner(params, grid).plan(PlannerInput(0.0, state(), threat(), 7.0, np.zeros((3, 2))))
         assert result.accel.shape == (n_p, 2) and result.predicted.shape == (n_p + 1, 4)
         assert np.all(np.abs(result.accel) <= 6.0 + 1e-12)
         np.testing.assert_allclose(result.predicted, kinematic_rollout(np.array([0, 0, 7.0, 0]), result.accel, 0.2))
-        assert result.cost == pytest.approx(MpcPlanner(params, VEHICLE).cost(
+        assert result.cost == pytest.approx(MpcPlanner(params, grid).cost(
             PlannerInput(0.0, state(), threat(), 7.0, None), result.accel / 6.0))
 
 
 @settings(max_examples=25, deadline=None)
 @given(st.floats(0.0, 3.0), st.floats(1.0, 8.0), st.floats(-1.0, 0.2), st.floats(-1.0, 1.0))
 def test_speed_never_negative_and_never_worse_than_the_start(v: float, x_obs: float, ux: float, uy: float) -> None:
-    planner = MpcPlanner(DEFAULT, VEHICLE)
+    planner = MpcPlanner(DEFAULT, GRID)
     guess = np.tile([ux * 6.0, uy * 6.0], (10, 1))  # braking guesses find reversing without the floor
     inp = PlannerInput(0.0, state(v), threat(w=2.0, x_min=x_obs), 0.0, guess)
     result = planner.plan(inp)
@@ -298,7 +299,7 @@ def test_speed_never_negative_and_never_worse_than_the_start(v: float, x_obs: fl
 
 
 def test_mirrored_side_gives_the_mirrored_solution() -> None:
-    planner = MpcPlanner(DEFAULT, VEHICLE)
+    planner = MpcPlanner(DEFAULT, GRID)
     for x_min in (6.0, 12.0, 20.0):
         left = planner.plan(PlannerInput(0.0, state(6.0, y=1.0, vy=0.3), threat(w=2.4, x_min=x_min, y_path=1.2), 6.0,
                                          None))
@@ -310,7 +311,7 @@ def test_mirrored_side_gives_the_mirrored_solution() -> None:
 
 
 def test_warm_start_from_the_previous_solution_is_not_worse() -> None:
-    planner = MpcPlanner(DEFAULT, VEHICLE)
+    planner = MpcPlanner(DEFAULT, GRID)
     cold = planner.plan(PlannerInput(0.0, state(), threat(), 7.0, None))
     warm = planner.plan(PlannerInput(0.0, state(), threat(), 7.0, cold.accel))
     assert warm.cost <= cold.cost + 1e-12
@@ -320,15 +321,15 @@ def test_warm_start_from_the_previous_solution_is_not_worse() -> None:
                                     dict(solver="sqp_lbfgs", speed_floor="constraint", qpsol="qpoases")])
 def test_solver_variants_solve_the_same_problem(change: dict) -> None:
     inp = PlannerInput(0.0, state(), threat(), 7.0, None)
-    base = MpcPlanner(DEFAULT, VEHICLE)
-    other = MpcPlanner(MpcParams(**change), VEHICLE).plan(inp)
+    base = MpcPlanner(DEFAULT, GRID)
+    other = MpcPlanner(MpcParams(**change), GRID).plan(inp)
     assert other.status in ("converged", "capped")
     assert other.accel[0, 1] == pytest.approx(6.0, abs=0.3)  # the same manoeuvre: full steering away
     assert base.cost(inp, other.accel / 6.0) < base.cost(inp, np.zeros((10, 2)))
 
 
 def test_problem_is_built_once() -> None:
-    a, b = MpcPlanner(DEFAULT, VEHICLE), MpcPlanner(MpcParams(), VEHICLE)
+    a, b = MpcPlanner(DEFAULT, GRID), MpcPlanner(MpcParams(), GRID)
     assert a._nlp is b._nlp  # same parameter set: one NLP, parametric in the planning inputs
     assert PAPER_CAPS == SolverCaps(10, 100, 1e-3, 1e-3, 1e-3)
 
@@ -337,8 +338,8 @@ def test_without_a_c_compiler_the_default_solver_names_the_way_out(tmp_path, mon
     monkeypatch.setenv("MOOSE_CACHE_DIR", str(tmp_path))  # nothing cached: the library must be built
     monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
     with pytest.raises(CompilerMissing, match="mpc.solver.*sqp_lbfgs"):
-        MpcPlanner(MpcParams(eta_return=0.125), VEHICLE)  # a parameter set not built before
-    assert MpcPlanner(MpcParams(eta_return=0.125, solver="sqp_lbfgs"), VEHICLE).plan(
+        MpcPlanner(MpcParams(eta_return=0.125), GRID)  # a parameter set not built before
+    assert MpcPlanner(MpcParams(eta_return=0.125, solver="sqp_lbfgs"), GRID).plan(
         PlannerInput(0.0, state(), threat(), 7.0, None)).status in ("converged", "capped")
 
 

@@ -6,13 +6,16 @@ import math
 import numpy as np
 import pytest
 
-from moose.detector import DetectorParams, ObstacleDetector
-from moose.maneuver import ManeuverParams, MaxSteeringTable
-from moose.msf import MsfParams, MsfPlanner, zoh_rollout
+from moose.detector import ObstacleDetector
+from moose.maneuver import MaxSteeringTable
+from moose.msf import MsfPlanner, zoh_rollout
 from moose.params import ParamError, VehicleParams
+from moose.schema import Config, MsfParams
 from moose.signals import Obstacle, PlannerInput, StateEstimate
+from moose.schema import DetectorParams, ManeuverParams
 
-VEHICLE = VehicleParams()
+VEHICLE = VehicleParams(mu=0.3)
+GRID = Config(vehicle=VEHICLE).grid
 T_S = 0.2
 
 
@@ -33,7 +36,7 @@ def closed_loop(table: MaxSteeringTable, v: float, zone: Obstacle, steps: int = 
     Returns the states every 10 ms (the exact zero-order-hold parabolas between plans) and the plans.
     """
     detector = ObstacleDetector(DetectorParams(), table)
-    planner = MsfPlanner(params, table, VEHICLE)
+    planner = MsfPlanner(params, GRID, table)
     state = np.array([0.0, 0.0, v, 0.0])
     fine, plans = [state], []
     for k in range(steps):
@@ -78,7 +81,7 @@ def test_clears_the_danger_zone_and_follows_the_scaled_maneuver(
 def test_full_maneuver_when_nu_is_large(table: MaxSteeringTable, v: float, tau: float, nu: float) -> None:
     # kappa = 1: the reference is y_max itself; the kinematic car follows it closely
     w = nu * table.y_max(tau, v)
-    planner = MsfPlanner(MsfParams(), table, VEHICLE)
+    planner = MsfPlanner(MsfParams(), GRID, table)
     assert planner.scale(w, tau, v) == 1.0
     path, _ = closed_loop(table, v, Obstacle(v * tau, v * tau + 2.0, -w, w), steps=8)
     t = 0.01 * np.arange(len(path))
@@ -97,7 +100,7 @@ def test_unreachable_width_holds_the_peak_of_the_maneuver(table: MaxSteeringTabl
 
 
 def test_scale_is_at_least_nu(table: MaxSteeringTable) -> None:
-    planner = MsfPlanner(MsfParams(), table, VEHICLE)
+    planner = MsfPlanner(MsfParams(), GRID, table)
     for v in (3.0, 5.0, 7.0, 10.0):
         for tau in (0.5, 1.4, 2.0, 3.0, 5.0):
             for nu in (0.05, 0.2, 0.5, 0.9):
@@ -129,7 +132,7 @@ def test_returns_to_the_lane_after_passing(table: MaxSteeringTable) -> None:
 
 
 def test_idle_keeps_the_lane_and_speed(table: MaxSteeringTable) -> None:
-    planner = MsfPlanner(MsfParams(), table, VEHICLE)
+    planner = MsfPlanner(MsfParams(), GRID, table)
     plan = planner.plan(PlannerInput(0.0, estimate_of(0.0, np.array([0.0, 0.0, 6.0, 0.0])), None, 6.0, None))
     assert plan.status == "idle" and plan.iterations == 0
     np.testing.assert_array_equal(plan.accel, np.zeros((10, 2)))
@@ -144,7 +147,7 @@ def test_idle_keeps_the_lane_and_speed(table: MaxSteeringTable) -> None:
 
 
 def test_new_obstacle_restarts_the_maneuver(table: MaxSteeringTable) -> None:
-    planner = MsfPlanner(MsfParams(), table, VEHICLE)
+    planner = MsfPlanner(MsfParams(), GRID, table)
     detector = ObstacleDetector(DetectorParams(), table)
     est = estimate_of(0.0, np.array([0.0, 0.0, 6.0, 0.0]))
     first = detector.update(0.0, est, [Obstacle(18.0, 20.0, -2.0, 2.0)])
@@ -173,7 +176,7 @@ def test_zoh_rollout_is_exact_for_piecewise_constant_acceleration() -> None:
         np.testing.assert_allclose(out[k + 1], np.concatenate([p, vel]), atol=1e-9)
 
 
-@pytest.mark.parametrize("field, value", [("N_p", 0), ("t_s", 0.0), ("a_y_max", -1.0), ("margin", -0.1),
+@pytest.mark.parametrize("field, value", [("margin", -0.1),
                                           ("reach_fraction", 1.5), ("omega_evade", 0.0)])
 def test_bad_parameters_name_the_field(field: str, value: float) -> None:
     with pytest.raises(ParamError, match=field):

@@ -5,13 +5,14 @@ from pathlib import Path
 
 import pytest
 
-from moose.params import ParamError, VehicleParams, build, read_ros_params
+from moose.params import VEHICLE_LIMITS, ParamError, VehicleParams, build, read_ros_params
 
 
 def test_table_one_defaults() -> None:
     p = VehicleParams()
     assert (p.m, p.Izz, p.J_wr, p.r, p.lf, p.lr) == (925.0, 617.0, 1.24, 0.301, 0.99, 0.71)
-    assert (p.T_max, p.delta_max, p.delta_rate_max) == (200.0, 0.3, 2618.0)
+    assert (p.T_max, p.delta_max) == (200.0, 0.3)
+    assert p.delta_rate_max == 1.0  # the road wheels' rate: Table I's 2618 rad/s is the EPS motor's 25 000 rpm
     assert (p.Cx, p.Bx, p.Cy, p.By) == (1.5, 8.0, 1.4057, 7.1138)
     # static loads add up to the weight and balance the moments about the CoG
     assert p.Fzf + p.Fzr == pytest.approx(p.m * p.g)
@@ -63,3 +64,21 @@ def test_bad_parameter_files(tmp_path: Path, text: str, needle: str) -> None:
 def test_missing_file_is_a_clear_error(tmp_path: Path) -> None:
     with pytest.raises(ParamError, match="cannot be read"):
         read_ros_params(tmp_path / "missing.yaml")
+
+
+@pytest.mark.parametrize("field, value", [("T_max", 300.0), ("delta_max", 0.5), ("delta_rate_max", 2618.0),
+                                          ("torque_rate_max", 1e5)])
+def test_configuration_cannot_loosen_the_hard_limits(field: str, value: float) -> None:
+    with pytest.raises(ParamError, match=rf"vehicle\.{field} = .* is invalid: expected at most the vehicle's hard limit"):
+        VehicleParams(**{field: value})
+    tighter = VehicleParams(**{field: getattr(VEHICLE_LIMITS, field) / 2})
+    assert getattr(tighter, field) == getattr(VEHICLE_LIMITS, field) / 2
+
+
+def test_acceleration_limits_of_the_vehicle() -> None:
+    # rear motors only: 2 T_max / r = 1329 N on 925 kg plus the wheels' 2 J / r^2 = 27.4 kg
+    assert VehicleParams(mu=0.8).longitudinal_accel_limit == pytest.approx(2 * 200 / 0.301 / (925 + 2 * 1.24 / 0.301**2))
+    # on ice the rear tyres limit first: mu F_zr = 0.1 * 925 * 9.81 * 0.99 / 1.7 = 528 N
+    assert VehicleParams(mu=0.1).longitudinal_accel_limit == pytest.approx(
+        0.1 * 925 * 9.81 * 0.99 / 1.7 / (925 + 2 * 1.24 / 0.301**2))
+    assert VehicleParams(mu=0.33).lateral_accel_limit == pytest.approx(0.33 * 9.81)

@@ -6,13 +6,14 @@ import math
 import numpy as np
 import pytest
 
-from moose.detector import DetectorParams, ObstacleDetector
-from moose.maneuver import ManeuverParams, MaxSteeringTable, lateral_steering_index
-from moose.observer import ObserverParams, StateObserver
+from moose.detector import ObstacleDetector
+from moose.maneuver import MaxSteeringTable, lateral_steering_index
+from moose.observer import StateObserver
 from moose.params import VehicleParams
-from moose.sensors import SensorParams, Sensors
+from moose.sensors import Sensors
 from moose.signals import EpsSample, GpsSample, ImuSample, Obstacle, StateEstimate, WheelSpeedSample
 from moose.vehicle import DELTA, VehiclePlant, initial_state
+from moose.schema import DetectorParams, ManeuverParams, ObserverParams, SensorParams
 
 P = VehicleParams()
 

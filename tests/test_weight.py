@@ -7,17 +7,19 @@ import numpy as np
 import pytest
 
 from moose.msf import zoh_rollout
+from moose.fbl import FeedbackLinearization
 from moose.params import ParamError, VehicleParams
+from moose.schema import FblParams, WeightParams
 from moose.signals import Blend, Obstacle, PlanResult, StateEstimate, Threat
 from moose.tire import peak_slip
-from moose.weight import WeightFunction, WeightParams
+from moose.weight import WeightFunction
 
 VEHICLE = VehicleParams()
 EST = StateEstimate(0.0, 0.0, 0.0, 0.0, 7.0, 0.0, 0.0, 0.0)
 
 
 def wf(**changes: float) -> WeightFunction:
-    return WeightFunction(WeightParams(**changes), VEHICLE)
+    return WeightFunction(WeightParams(**changes), FeedbackLinearization(FblParams(), VEHICLE, 0.2))
 
 
 def plan(ay: float, status: str = "converged", ax: float = 0.0, v: float = 7.0) -> PlanResult:

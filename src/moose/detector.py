@@ -23,33 +23,12 @@ sensor any more are dropped.
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 from typing import Optional, Sequence
 
 from .maneuver import MaxSteeringTable, lateral_steering_index, time_to_collision
-from .params import check, non_negative, positive
+from .schema import DetectorParams
 from .signals import Obstacle, StateEstimate, Threat
-
-
-@dataclasses.dataclass(frozen=True)
-class DetectorParams:
-    """Detector parameters."""
-
-    pass_margin: float = 2.0
-    """Distance past the zone's far end x_max after which the threat is cleared (m)."""
-    range_m: float = 80.0
-    """Perception range ahead of the CoG (m)."""
-    side_tie: float = 0.25
-    """Displacements to either side closer than this count as a tie: evade left (m)."""
-    lateral_margin: float = 0.0
-    """A zone whose lateral extent is within this distance of the ego path is in the path (m)."""
-
-    def __post_init__(self) -> None:
-        check("pass_margin", self.pass_margin, non_negative, "a non-negative distance (m)")
-        check("range_m", self.range_m, positive, "a positive distance (m)")
-        check("side_tie", self.side_tie, non_negative, "a non-negative distance (m)")
-        check("lateral_margin", self.lateral_margin, non_negative, "a non-negative distance (m)")
 
 
 def evasion_side(obstacle: Obstacle, y_path: float, side_tie: float) -> int:

@@ -17,42 +17,27 @@ branch (saturating at the peak slip), and add back β + l_f γ / v_x (eq. (alf))
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
 
-from .params import VehicleParams, check, non_negative, positive
+from .params import VehicleParams
+from .schema import FblParams
 from .signals import Reference, StateEstimate
 from .tire import inverse_lateral, pacejka
-
-
-@dataclasses.dataclass(frozen=True)
-class FblParams:
-    """FBL parameters."""
-
-    t_s: float = 0.2
-    """Planning sampling time (s): horizon of the speed reference."""
-    mu_model: float = 0.0
-    """Friction the FBL assumes; 0 uses the vehicle's μ (ROS 2 parameters cannot be null)."""
-    v_min_ref: float = 0.0
-    """Lowest speed reference (m/s): the car never reverses."""
-
-    def __post_init__(self) -> None:
-        check("t_s", self.t_s, positive, "a positive time (s)")
-        check("v_min_ref", self.v_min_ref, non_negative, "a non-negative speed (m/s)")
-        check("mu_model", self.mu_model, non_negative, "a friction coefficient (0: the vehicle's)")
 
 
 class FeedbackLinearization:
     """δ*, v_x* from the blended accelerations and the current estimate."""
 
-    def __init__(self, params: FblParams, vehicle: VehicleParams) -> None:
+    def __init__(self, params: FblParams, vehicle: VehicleParams, t_s: float) -> None:
         self.params = params
         self.vehicle = vehicle
-        mu = params.mu_model if params.mu_model > 0.0 else vehicle.mu
-        self._fzf = mu * vehicle.Fzf
-        self._fzr = mu * vehicle.Fzr
+        """The vehicle as the stack believes it (the planning μ)."""
+        self.t_s = t_s
+        """Planning sampling time (s): horizon of the speed reference."""
+        self._fzf = vehicle.mu * vehicle.Fzf
+        self._fzr = vehicle.mu * vehicle.Fzr
 
     def reference(self, accel: np.ndarray, estimate: StateEstimate) -> Reference:
         p = self.vehicle
@@ -68,5 +53,5 @@ class FeedbackLinearization:
         delta = beta + p.lf * estimate.gamma / v_bar + alpha_f
         delta = min(max(delta, -p.delta_max), p.delta_max)
         vx_dot = a_x + estimate.vy * estimate.gamma
-        vx_ref = max(estimate.vx + self.params.t_s * vx_dot, self.params.v_min_ref)
+        vx_ref = max(estimate.vx + self.t_s * vx_dot, self.params.v_min_ref)
         return Reference(delta=float(delta), vx=float(vx_ref))

@@ -51,36 +51,11 @@ enforced).  Its effective time constant is −dt / ln(1 − K_δ dt) = 45 ms.
 """
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 
-from .params import VehicleParams, check, positive, unit_interval
+from .params import VehicleParams
+from .schema import MotionParams
 from .signals import Reference, StateEstimate
-
-
-@dataclasses.dataclass(frozen=True)
-class MotionParams:
-    """Motion-controller parameters."""
-
-    pole: float = 1.0
-    """ω_c (rad/s): both closed-loop poles of the speed loop at −ω_c (paper: −1 rad/s)."""
-    slip_nominal: float = 0.05
-    """λ_n of the nominal plant P_n(s) (paper: 0.05)."""
-    t_ramp: float = 0.2
-    """Duration of the reference ramp to each new v_x* (s): the planning period t_s."""
-    feed_forward: bool = True
-    """Ramp the reference and feed the nominal plant's inverse forward (C_v,ff); False leaves the bare PI."""
-    accel_margin: float = 1.0
-    """Share of T_max the feed-forward ramp may ask for (1: the full torque; below 1 leaves feedback headroom)."""
-    k_delta: float = 20.0
-    """EPS feedback gain K_δ (1/s)."""
-
-    def __post_init__(self) -> None:
-        for name in ("pole", "t_ramp", "k_delta"):
-            check(name, getattr(self, name), positive, "a positive number")
-        check("slip_nominal", self.slip_nominal, lambda v: 0.0 <= v < 1.0, "a slip ratio in [0, 1)")
-        check("accel_margin", self.accel_margin, lambda v: unit_interval(v) and v > 0.0, "a share in (0, 1]")
 
 
 class MotionController:

@@ -46,140 +46,15 @@ import dataclasses
 import math
 import time
 from functools import lru_cache
-from typing import Any, Literal
+from typing import Any
 
 import casadi as ca
 import numpy as np
 
-from .params import G, VehicleParams, check, non_negative, positive
+from .params import G
 from .projected_newton import CompilerMissing, NewtonOptions, ProjectedNewton
+from .schema import MpcParams, PlanningGrid
 from .signals import PlannerInput, PlanResult, PlanStatus
-
-SolverName = Literal["projected_newton", "sqp_lbfgs", "sqp_exact", "ipopt"]
-"""``projected_newton``: :mod:`moose.projected_newton`, exact Hessian, compiled C (default);
-``sqp_lbfgs``: CasADi's sqpmethod with a BFGS Hessian; ``sqp_exact``: sqpmethod with the exact
-Hessian, regularised to be positive definite; ``ipopt``: interior point (reference)."""
-SOLVERS: tuple[SolverName, ...] = ("projected_newton", "sqp_lbfgs", "sqp_exact", "ipopt")
-
-QpSolverName = Literal["qrqp", "qpoases"]
-"""QP solver of ``sqpmethod`` (the other solvers ignore it)."""
-
-BarrierName = Literal["paper", "clipped"]
-"""``paper``: J_safe = −log d, which keeps rewarding distance from y_safe; ``clipped``: 0 beyond a clearance."""
-
-SpeedFloor = Literal["penalty", "constraint"]
-"""How v_X ≥ 0 enters the NLP."""
-
-
-@dataclasses.dataclass(frozen=True)
-class SolverCaps:
-    """Stopping criteria of the NLP solver (Table II of the paper)."""
-
-    max_iter: int = 10
-    """Maximum number of SQP iterations."""
-    max_fun_evals: int = 100
-    """Maximum number of cost evaluations (guaranteed through ``MpcParams.max_iter_ls``)."""
-    constraint_tol: float = 1e-3
-    """Primal infeasibility tolerance."""
-    optimality_tol: float = 1e-3
-    """Tolerance on the inf-norm of the gradient of the Lagrangian."""
-    step_tol: float = 1e-3
-    """Stop when the inf-norm of the step (normalised inputs) falls below this."""
-
-    def __post_init__(self) -> None:
-        check("max_iter", self.max_iter, lambda v: isinstance(v, int) and v >= 1, "an integer ≥ 1")
-        check("max_fun_evals", self.max_fun_evals, lambda v: isinstance(v, int) and v > self.max_iter,
-              "an integer above max_iter")
-        for name in ("constraint_tol", "optimality_tol", "step_tol"):
-            check(name, getattr(self, name), positive, "a positive tolerance")
-
-
-PAPER_CAPS = SolverCaps()
-"""Table II: 10 iterations, 100 function evaluations, tolerances 1e-3."""
-
-
-@dataclasses.dataclass(frozen=True)
-class MpcParams:
-    """MPC planner parameters (paper defaults where the paper gives them)."""
-
-    N_p: int = 10
-    """Prediction horizon (steps)."""
-    t_s: float = 0.2
-    """Planning sampling time (s), Table I."""
-    eta: tuple[float, float, float, float] = (0.5, 0.25, 0.05, 0.2)
-    """Weights η of J_safe, J_stable, J_brake, J_steer, eq. (jcaldef) (Example emp:eta's second set)."""
-    eta_return: float = 0.1
-    """Weight of the lane-keeping term η_return |ỹ| (not in the paper)."""
-    a_x_max: float = 6.0
-    """Bound of v̇_X (m/s²): the normalisation of the first input."""
-    a_y_max: float = 6.0
-    """Bound of v̇_Y (m/s²): the normalisation of the second input."""
-    mu: float = 0.3
-    """Friction the planner assumes in ε = 1/√(8.8 μ g), eq. (ysafe)."""
-    barrier_margin: float = 0.3
-    """d₀ (m): below it the barrier is continued by its second-order Taylor polynomial."""
-    barrier: BarrierName = "paper"
-    """J_safe's shape (:func:`j_safe`): ``paper`` −log d, or ``clipped`` at ``barrier_clearance``."""
-    barrier_clearance: float = 1.0
-    """c (m): clearance above y_safe beyond which the ``clipped`` J_safe is 0."""
-    pass_margin: float = 1.0
-    """Distance past the obstacle's far edge where J_safe has fallen to half (m); it falls over a
-    quarter of this (2 % left at the far edge)."""
-    reverse_penalty: float = 100.0
-    """Weight of min(v_X, 0)² when ``speed_floor`` is ``penalty``."""
-    caps: SolverCaps = PAPER_CAPS
-    """Stopping criteria (Table II)."""
-    max_iter_ls: int = 8
-    """Backtracking steps per iteration (each evaluates the cost once)."""
-    ls_beta: float = 0.3
-    """Line-search backtracking factor (0.5 left line searches without decrease on the benchmark's
-    problems with ``projected_newton``)."""
-    active_set_tol: float = 0.1
-    """ε of ``projected_newton``'s ε-active set (normalised inputs): an input this close to its bound,
-    the gradient pushing outward, is held there for the Newton step."""
-    time_budget_s: float = 0.2
-    """Wall-clock budget of one plan (s), one planning period; above it the status is ``over_budget``."""
-    solver: SolverName = "projected_newton"
-    """NLP solver (docs/design.md, "MPC": chosen by bench/bench_mpc.py)."""
-    qpsol: QpSolverName = "qrqp"
-    """QP solver of ``sqpmethod``."""
-    speed_floor: SpeedFloor = "penalty"
-    """How v_X ≥ 0 enters the NLP; the returned plan is projected onto v_X ≥ 0 either way.
-    ``constraint`` (linear constraints on the inputs) needs sqpmethod with ``qpsol = qpoases``, or IPOPT."""
-    v_reg: float = 0.5
-    """Speed regularising |v_Y / v_X| and √(w v_X²) at v_X → 0 (m/s)."""
-    abs_eps: float = 0.05
-    """Smoothing of |·|: √(x² + abs_eps²) − abs_eps."""
-
-    def __post_init__(self) -> None:
-        check("N_p", self.N_p, lambda v: isinstance(v, int) and 1 <= v <= 100, "an integer in [1, 100]")
-        for name in ("t_s", "a_x_max", "a_y_max", "mu", "barrier_margin", "pass_margin", "time_budget_s",
-                     "v_reg", "abs_eps", "active_set_tol"):
-            check(name, getattr(self, name), positive, "a positive number")
-        for name in ("eta_return", "reverse_penalty"):
-            check(name, getattr(self, name), non_negative, "a non-negative number")
-        check("barrier", self.barrier, lambda v: v in ("paper", "clipped"), "paper or clipped")
-        check("barrier_clearance", self.barrier_clearance, lambda v: v > self.barrier_margin,
-              "a clearance above barrier_margin")
-        check("eta", self.eta, lambda e: len(e) == 4 and all(0.0 <= v <= 1.0 for v in e) and abs(sum(e) - 1.0) < 1e-9,
-              "a convex combination: four weights in [0, 1] summing to 1")
-        check("ls_beta", self.ls_beta, lambda v: 0.0 < v < 1.0, "a factor in (0, 1)")
-        check("solver", self.solver, lambda v: v in SOLVERS, "one of " + ", ".join(SOLVERS))
-        check("qpsol", self.qpsol, lambda v: v in ("qrqp", "qpoases"), "qrqp or qpoases")
-        check("speed_floor", self.speed_floor, lambda v: v in ("penalty", "constraint"), "penalty or constraint")
-        check("speed_floor", self.speed_floor,
-              lambda v: v == "penalty" or self.solver == "ipopt" or (self.solver.startswith("sqp") and self.qpsol == "qpoases"),
-              "penalty with projected_newton (bounds only) or with qrqp (qrqp stalls on the linear speed "
-              "constraints: 220 ms measured); constraint needs an sqp solver with qpsol = qpoases, or solver = ipopt")
-        check("max_iter_ls", self.max_iter_ls,
-              lambda v: isinstance(v, int) and v >= 0 and self.caps.max_iter * (1 + v) + 1 <= self.caps.max_fun_evals,
-              "an integer ≥ 0 with max_iter (1 + max_iter_ls) + 1 ≤ caps.max_fun_evals "
-              "(an iteration evaluates the cost at most 1 + max_iter_ls times)")
-
-    @property
-    def epsilon(self) -> float:
-        """ε of eq. (ysafe) for the planner's μ."""
-        return epsilon(self.mu)
 
 
 def epsilon(mu: float) -> float:
@@ -294,7 +169,7 @@ def kinematic_rollout(state: np.ndarray, accel: np.ndarray, t_s: float) -> np.nd
     return out
 
 
-def _cost_expression(params: MpcParams, u: Any, p: Any) -> tuple[Any, list[Any]]:
+def _cost_expression(params: MpcParams, n_p: int, t_s: float, u: Any, p: Any) -> tuple[Any, list[Any]]:
     """𝒥 of eq. (jcaldef) with the lane-keeping and speed-floor terms, and the predicted v_X."""
     x, y, vX, vY, v_des, x_near, x_far, w, side, y_path, active, eps, ax_max, ay_max = (
         p[i] for i in range(len(PARAMETERS)))
@@ -304,9 +179,9 @@ def _cost_expression(params: MpcParams, u: Any, p: Any) -> tuple[Any, list[Any]]
     cost = 0
     speeds = []
     state = (x, y, vX, vY)
-    for k in range(params.N_p):  # i = 1..N_p: the state produced by u(k+i-1)
+    for k in range(n_p):  # i = 1..N_p: the state produced by u(k+i-1)
         uX, uY = u[2 * k], u[2 * k + 1]
-        state = kinematic_step(state, (uX * ax_max, uY * ay_max), params.t_s)
+        state = kinematic_step(state, (uX * ax_max, uY * ay_max), t_s)
         xk, yk, vXk, vYk = state
         speeds.append(vXk)
         y_tilde = side * (yk - y_path)
@@ -366,11 +241,11 @@ class _Nlp:
 
 
 @lru_cache(maxsize=16)
-def _build(params: MpcParams) -> _Nlp:
+def _build(params: MpcParams, n_p: int, t_s: float) -> _Nlp:
     """The NLP of eq. (planmpc), built once per parameter set."""
-    u = ca.SX.sym("u", 2 * params.N_p)
+    u = ca.SX.sym("u", 2 * n_p)
     p = ca.SX.sym("p", len(PARAMETERS))
-    cost, speeds = _cost_expression(params, u, p)
+    cost, speeds = _cost_expression(params, n_p, t_s, u, p)
     cost_fn = ca.Function("mpc_cost", [u, p], [cost])
     if params.solver == "projected_newton":
         try:
@@ -382,35 +257,35 @@ def _build(params: MpcParams) -> _Nlp:
     n_g = 0
     if params.speed_floor == "constraint":
         nlp["g"] = ca.vertcat(*speeds)
-        n_g = params.N_p
+        n_g = n_p
     plugin, options = _solver_options(params)
     return _Nlp(ca.nlpsol("mpc", plugin, nlp, options), cost_fn, n_g)
 
 
-def speed_floor(vX0: float, params: MpcParams) -> np.ndarray:
+def speed_floor(vX0: float, grid: PlanningGrid) -> np.ndarray:
     """Lower bounds of v_X(k+i), i = 1..N_p: 0, or what full acceleration reaches if that is below 0."""
-    i = np.arange(1, params.N_p + 1)
-    return np.minimum(0.0, vX0 + i * params.t_s * params.a_x_max)
+    i = np.arange(1, grid.N_p + 1)
+    return np.minimum(0.0, vX0 + i * grid.t_s * grid.a_x_max)
 
 
-def keep_speed_non_negative(u: np.ndarray, vX0: float, params: MpcParams) -> np.ndarray:
+def keep_speed_non_negative(u: np.ndarray, vX0: float, grid: PlanningGrid) -> np.ndarray:
     """Normalised (N_p, 2) inputs with each v̇_X raised just enough that v_X stays above :func:`speed_floor`."""
     out = np.array(u, dtype=float)
-    _raise_braking(out, vX0, params)
+    _raise_braking(out, vX0, grid)
     return out
 
 
-def _raise_braking(u: np.ndarray, vX0: float, params: MpcParams) -> bool:
+def _raise_braking(u: np.ndarray, vX0: float, grid: PlanningGrid) -> bool:
     """:func:`keep_speed_non_negative` in place on normalised (N_p, 2) inputs; True if an input was raised.
 
     A plain loop: on ten floats it is several times faster than NumPy's small-array calls.
     """
     if not math.isfinite(vX0):
         return False
-    gain = params.t_s * params.a_x_max
+    gain = grid.t_s * grid.a_x_max
     column = u[:, 0].tolist()
     v, raised = vX0, False
-    for k, (uk, floor) in enumerate(zip(column, speed_floor(vX0, params).tolist())):
+    for k, (uk, floor) in enumerate(zip(column, speed_floor(vX0, grid).tolist())):
         if v + gain * uk < floor:
             uk = column[k] = min((floor - v) / gain, 1.0)
             raised = True
@@ -430,26 +305,27 @@ _NEWTON_STATUS: dict[str, PlanStatus] = {
 class MpcPlanner:
     """The MPC planner of Sec. IV-B: one NLP built once, solved at every planning instant."""
 
-    def __init__(self, params: MpcParams, vehicle: VehicleParams) -> None:
+    def __init__(self, params: MpcParams, grid: PlanningGrid) -> None:
         self.params = params
-        self.vehicle = vehicle
-        self._nlp = _build(params)
+        self.grid = grid
+        """Horizon, sampling time, input bounds and planning μ (shared with the MSF planner)."""
+        self._nlp = _build(params, grid.N_p, grid.t_s)
 
     @property
     def scale(self) -> np.ndarray:
         """(a_x_max, a_y_max): normalised input × scale = acceleration (m/s²)."""
-        return np.array([self.params.a_x_max, self.params.a_y_max])
+        return np.array([self.grid.a_x_max, self.grid.a_y_max])
 
     def parameters(self, inp: PlannerInput) -> np.ndarray:
         """The NLP's parameter vector (:data:`PARAMETERS`) at a planning instant."""
-        est, threat, prm = inp.estimate, inp.threat, self.params
+        est, threat, grid = inp.estimate, inp.threat, self.grid
         if threat is not None:
             box = threat.obstacle
             geometry = (box.x_min, box.x_max, threat.w, float(threat.side), threat.y_path, 1.0)
         else:  # lane keeping: no barrier, the lane is the path
             geometry = (0.0, 0.0, 1.0, 1.0, inp.y_lane, 0.0)
         return np.array([est.x, est.y, est.vX, est.vY, inp.v_des, *geometry,
-                         prm.epsilon, prm.a_x_max, prm.a_y_max], dtype=float)
+                         epsilon(grid.mu), grid.a_x_max, grid.a_y_max], dtype=float)
 
     def initial_guess(self, inp: PlannerInput) -> np.ndarray:
         """Normalised (N_p, 2) starting point: the shifted previous blend, else zeros (keep speed and heading).
@@ -457,7 +333,7 @@ class MpcPlanner:
         A shorter guess is padded with its last row, non-finite entries become 0, values are
         clipped to [−1, 1] and braking is reduced where it would predict v_X < 0.
         """
-        n = self.params.N_p
+        n = self.grid.N_p
         guess = np.zeros((n, 2))
         if inp.initial_guess is not None:
             given = np.asarray(inp.initial_guess, dtype=float).reshape(-1, 2)[:n]
@@ -466,7 +342,7 @@ class MpcPlanner:
                 guess[len(given):] = given[-1]
             guess = guess / self.scale
         guess = np.clip(np.nan_to_num(guess, nan=0.0, posinf=1.0, neginf=-1.0), -1.0, 1.0)
-        return keep_speed_non_negative(guess, inp.estimate.vX, self.params)
+        return keep_speed_non_negative(guess, inp.estimate.vX, self.grid)
 
     @property
     def cost_function(self) -> Any:
@@ -503,7 +379,7 @@ class MpcPlanner:
             status, iterations, candidate, f, f_start = self._solve(guess, p)
             if status != "failed":
                 solution = candidate
-                if _raise_braking(solution, p[2], prm):
+                if _raise_braking(solution, p[2], self.grid):
                     f = self._cost(solution.ravel(), p)
                 solution, cost = (guess, f_start) if f_start < f else (solution, f)
         elapsed = time.perf_counter() - start
@@ -514,7 +390,7 @@ class MpcPlanner:
         state = np.array([est.x, est.y, est.vX, est.vY], dtype=float)
         state[~np.isfinite(state)] = 0.0  # a failed plan on a non-finite estimate still predicts finite states
         return PlanResult(accel=accel, status=status, iterations=iterations, solve_time_s=elapsed, cost=cost,
-                          predicted=kinematic_rollout(state, accel, prm.t_s))
+                          predicted=kinematic_rollout(state, accel, self.grid.t_s))
 
     def _solve(self, guess: np.ndarray, p: np.ndarray) -> tuple[PlanStatus, int, np.ndarray, float, float]:
         """One NLP solve: (status, iterations, normalised (N_p, 2) inputs within the bounds (a new array),
@@ -525,10 +401,10 @@ class MpcPlanner:
             status = _NEWTON_STATUS[result.status]
             if status == "failed":
                 return status, result.iterations, guess, math.inf, math.inf
-            return status, result.iterations, result.u.reshape(self.params.N_p, 2), result.f, result.f_start
+            return status, result.iterations, result.u.reshape(self.grid.N_p, 2), result.f, result.f_start
         args: dict[str, Any] = {"x0": guess.ravel(), "p": p, "lbx": -1.0, "ubx": 1.0}
         if self._nlp.n_g:
-            args["lbg"] = speed_floor(p[2], self.params)
+            args["lbg"] = speed_floor(p[2], self.grid)
             args["ubg"] = math.inf
         try:
             sol = solver(**args)
@@ -536,7 +412,7 @@ class MpcPlanner:
         except RuntimeError:  # solver error, or CasADi could not report its statistics
             return "failed", 0, guess, math.inf, math.inf
         iterations = int(stats.get("iter_count", 0))
-        candidate = np.asarray(sol["x"], dtype=float).reshape(self.params.N_p, 2)
+        candidate = np.asarray(sol["x"], dtype=float).reshape(self.grid.N_p, 2)
         f = float(sol["f"])
         if not (np.all(np.isfinite(candidate)) and math.isfinite(f)):
             return "failed", iterations, guess, math.inf, math.inf

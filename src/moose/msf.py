@@ -40,39 +40,8 @@ from typing import Optional
 import numpy as np
 
 from .maneuver import MaxSteeringTable
-from .params import VehicleParams, check, non_negative, positive
+from .schema import MsfParams, PlanningGrid
 from .signals import Obstacle, PlannerInput, PlanResult
-
-
-@dataclasses.dataclass(frozen=True)
-class MsfParams:
-    """MSF planner parameters."""
-
-    N_p: int = 10
-    """Prediction horizon (steps), the MPC's."""
-    t_s: float = 0.2
-    """Planning sampling time (s), Table I."""
-    a_x_max: float = 6.0
-    """Bound of the longitudinal acceleration (m/s²), the MPC's input bound."""
-    a_y_max: float = 6.0
-    """Bound of the lateral acceleration (m/s²), the MPC's input bound."""
-    margin: float = 0.5
-    """Lateral margin m beyond the far edge (m)."""
-    omega_evade: float = 2.5
-    """Natural frequency of the lateral tracking law while evading (rad/s)."""
-    omega_return: float = 1.0
-    """Natural frequency of the lane return (rad/s)."""
-    k_speed: float = 0.5
-    """Speed-tracking gain k_v (1/s)."""
-    reach_fraction: float = 0.6
-    """f: the scaled maneuver reaches w + margin after this fraction of τ (early, like a driver)."""
-
-    def __post_init__(self) -> None:
-        check("N_p", self.N_p, lambda v: isinstance(v, int) and 1 <= v <= 100, "an integer in [1, 100]")
-        for name in ("t_s", "a_x_max", "a_y_max", "omega_evade", "omega_return", "k_speed"):
-            check(name, getattr(self, name), positive, "a positive number")
-        check("margin", self.margin, non_negative, "a non-negative distance (m)")
-        check("reach_fraction", self.reach_fraction, lambda v: 0.0 < v <= 1.0, "a fraction in (0, 1]")
 
 
 def zoh_rollout(state: np.ndarray, accel: np.ndarray, t_s: float) -> np.ndarray:
@@ -105,10 +74,10 @@ class _Evasion:
 class MsfPlanner:
     """Maximum steering feed-forward; remembers the current obstacle's detection time and scale κ."""
 
-    def __init__(self, params: MsfParams, table: MaxSteeringTable, vehicle: VehicleParams) -> None:
+    def __init__(self, params: MsfParams, grid: PlanningGrid, table: MaxSteeringTable) -> None:
         self.params = params
         self.table = table
-        self.vehicle = vehicle
+        self.grid = grid
         self._evasion: Optional[_Evasion] = None
 
     def reset(self) -> None:
@@ -129,7 +98,7 @@ class MsfPlanner:
         if y_ref >= target:
             return target, 0.0, 0.0
         v_ref = k * table.v_Y_max(s, v)
-        a_ref = (k * table.v_Y_max(s + self.params.t_s, v) - v_ref) / self.params.t_s
+        a_ref = (k * table.v_Y_max(s + self.grid.t_s, v) - v_ref) / self.grid.t_s
         return y_ref, v_ref, a_ref
 
     def plan(self, inp: PlannerInput) -> PlanResult:
@@ -152,10 +121,11 @@ class MsfPlanner:
         else:
             k_p, k_v = p.omega_return**2, 2.0 * p.omega_return
         state = np.array([est.x, est.y, est.vX, est.vY], dtype=float)
-        accel = np.zeros((p.N_p, 2))
-        ts = p.t_s
+        g = self.grid
+        accel = np.zeros((g.N_p, 2))
+        ts = g.t_s
         y, vX, vY = float(est.y), float(state[2]), float(state[3])
-        for k in range(p.N_p):
+        for k in range(g.N_p):
             offset, v_lat = side * (y - y_path), side * vY
             if evasion is not None:
                 y_ref, v_ref, a_ref = self._reference(inp.t + k * ts - evasion.t0, evasion, target)
@@ -163,8 +133,8 @@ class MsfPlanner:
                 y_ref = v_ref = a_ref = 0.0
             a_lat = side * (a_ref + k_v * (v_ref - v_lat) + k_p * (y_ref - offset))
             a_lon = p.k_speed * (inp.v_des - vX)
-            a_lon = min(max(a_lon, -p.a_x_max), p.a_x_max)
-            a_lat = min(max(a_lat, -p.a_y_max), p.a_y_max)
+            a_lon = min(max(a_lon, -g.a_x_max), g.a_x_max)
+            a_lat = min(max(a_lat, -g.a_y_max), g.a_y_max)
             accel[k, 0], accel[k, 1] = a_lon, a_lat
             # eq. (skin), exact zero-order hold (lateral part; x does not enter the law)
             y += ts * vY + 0.5 * ts * ts * a_lat

@@ -31,7 +31,6 @@ velocity whenever the tyres carry lateral force, and kept in [mu_min, mu_max].
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections import deque
 from functools import lru_cache
@@ -41,7 +40,8 @@ import casadi as ca
 import numpy as np
 
 from .ccompile import compile_function
-from .params import ParamError, VehicleParams, check, non_negative, positive
+from .params import VehicleParams
+from .schema import ObserverParams
 from .signals import EpsSample, GpsSample, ImuSample, StateEstimate, WheelSpeedSample
 from .tire import pacejka
 from .vehicle import symbolic_params, vehicle_vector
@@ -57,57 +57,13 @@ MU = 6
 """Index of μ in the augmented state."""
 
 
-@dataclasses.dataclass(frozen=True)
-class ObserverParams:
-    """Noise model (SI units, standard deviations), history length and the optional μ estimation."""
-
-    mu_model: float = 0.0
-    """Friction of the observer's tyre model (the initial value when estimated); 0 uses the vehicle's μ
-    (ROS 2 parameters cannot be null)."""
-    q_position: float = 0.05
-    q_yaw: float = 0.002
-    q_vx: float = 0.3
-    q_vy: float = 0.3
-    q_yaw_rate: float = 0.3
-    """Process noise densities (per √s) of x/y, θ, v_x, v_y, γ."""
-    r_yaw_rate: float = 0.003
-    r_lateral_accel: float = 0.3
-    """IMU a_y against the model: sensor noise plus tyre-model error (m/s²)."""
-    r_wheel_speed: float = 0.1
-    r_gps_position: float = 0.03
-    r_gps_velocity: float = 0.05
-    history_s: float = 1.5
-    """How far back a late GPS fix can be fused (s)."""
-    estimate_mu: bool = False
-    """Augment the state with μ (random walk) instead of trusting ``mu_model``."""
-    q_mu: float = 0.02
-    """Process noise density of μ (per √s), used with ``estimate_mu``."""
-    mu_std0: float = 0.2
-    """Initial standard deviation of μ, used with ``estimate_mu``."""
-    mu_min: float = 0.1
-    mu_max: float = 1.2
-    """Range the estimated μ is kept in."""
-
-    def __post_init__(self) -> None:
-        check("mu_model", self.mu_model, non_negative, "a friction coefficient (0: the vehicle's)")
-        for name in ("q_position", "q_yaw", "q_vx", "q_vy", "q_yaw_rate", "r_yaw_rate", "r_lateral_accel",
-                     "r_wheel_speed", "r_gps_position", "r_gps_velocity", "history_s", "q_mu", "mu_std0",
-                     "mu_min", "mu_max"):
-            check(name, getattr(self, name), positive, "a positive number")
-        if not self.mu_min < self.mu_max:
-            raise ParamError(f"mu_min = {self.mu_min!r} is invalid: expected below mu_max = {self.mu_max!r}")
-        if self.estimate_mu and self.mu_model > 0.0 and not self.mu_min <= self.mu_model <= self.mu_max:
-            raise ParamError(f"mu_model = {self.mu_model!r} is invalid: expected within "
-                             f"[mu_min, mu_max] = [{self.mu_min!r}, {self.mu_max!r}] when μ is estimated")
-
-
 class StateObserver:
     """EKF with delayed-GPS re-propagation; ``update`` takes samples in time order."""
 
     def __init__(self, params: ObserverParams, vehicle: VehicleParams, initial: StateEstimate | None = None) -> None:
         self.params = params
         self.vehicle = vehicle
-        self._mu = params.mu_model if params.mu_model > 0.0 else vehicle.mu
+        self._mu = vehicle.mu  # the planning μ: the stack's one belief about the road
         if params.estimate_mu:
             self._mu = min(max(self._mu, params.mu_min), params.mu_max)
         self._n = 7 if params.estimate_mu else 6
@@ -120,7 +76,7 @@ class StateObserver:
         self.reset(initial or StateEstimate(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
 
     def reset(self, estimate: StateEstimate) -> None:
-        """Restart from ``estimate`` (μ from ``mu_model`` when estimated); forgets the history."""
+        """Restart from ``estimate`` (an estimated μ restarts at the vehicle's μ); forgets the history."""
         x = [estimate.x, estimate.y, estimate.theta, estimate.vx, estimate.vy, estimate.gamma]
         std = [0.05, 0.05, 0.01, 0.2, 0.2, 0.05]
         if self._n == 7:
@@ -141,7 +97,7 @@ class StateObserver:
 
     @property
     def mu_estimate(self) -> float:
-        """The friction coefficient of the tyre model: estimated with ``estimate_mu``, else ``mu_model``."""
+        """The friction coefficient of the tyre model: estimated with ``estimate_mu``, else the vehicle's μ."""
         return float(self._x[MU]) if self._n == 7 else self._mu
 
     @property

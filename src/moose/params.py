@@ -112,8 +112,10 @@ class VehicleParams:
     """Lateral Pacejka shape factor."""
     By: float = 7.1138
     """Lateral Pacejka stiffness factor."""
-    mu: float = 0.5
-    """Tyre-road friction coefficient of the plant: the value that reproduces the paper's y_max (docs/design.md)."""
+    mu: float = 0.8
+    """Tyre-road friction of the road the plant drives on (dry asphalt: 0.8–1.0).  A scenario may set its
+    own (the paper's cases run at the calibrated friction, docs/design.md, "Friction"); the stack
+    assumes the same μ unless ``planning.mu_estimate`` says otherwise."""
     track: float = 1.3
     """Rear track width (m); not in Table I."""
     v_low: float = 2.0
@@ -143,6 +145,19 @@ class VehicleParams:
     def Fzr(self) -> float:
         """Static normal load on the rear axle (N)."""
         return self.m * self.g * self.lf / self.wheelbase
+
+    @property
+    def longitudinal_accel_limit(self) -> float:
+        """Largest |v̇_x| the car can give (m/s²), driving or braking: the rear in-wheel motors are the
+        only actuators (regenerative braking, F_xf = 0), limited by their torque 2 T_max / r and by
+        the rear tyres' grip μ F_zr, acting on the mass plus the wheels' rotational inertia."""
+        force = min(2.0 * self.T_max / self.r, self.mu * self.Fzr)
+        return force / (self.m + 2.0 * self.J_wr / self.r**2)
+
+    @property
+    def lateral_accel_limit(self) -> float:
+        """Largest lateral acceleration the tyres can give (m/s²): μ g (eq. (fy) peaks at μ F_z on both axles)."""
+        return self.mu * self.g
 
 
 def _coerce(name: str, value: Any, hint: Any) -> Any:

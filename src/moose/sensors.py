@@ -32,7 +32,8 @@ from typing import Union
 
 import numpy as np
 
-from .params import VehicleParams, check, non_negative, positive
+from .params import VehicleParams
+from .schema import SensorParams
 from .signals import EpsSample, GpsSample, ImuSample, WheelSpeedSample
 from .vehicle import DELTA, GAMMA, OMEGA_RL, OMEGA_RR, THETA, VX, VY, X, Y
 
@@ -40,37 +41,6 @@ Sample = Union[ImuSample, GpsSample, WheelSpeedSample, EpsSample]
 
 _TICK_TOLERANCE = 1e-6
 """Fraction of a sample period by which a call may precede a sample's due time (float round-off of k · dt)."""
-
-
-@dataclasses.dataclass(frozen=True)
-class SensorParams:
-    """Rates (Hz), GPS lag (s) and noise standard deviations (SI units); see the module docstring."""
-
-    imu_rate_hz: float = 100.0
-    wheel_rate_hz: float = 100.0
-    eps_rate_hz: float = 100.0
-    gps_rate_hz: float = 1.0
-    """Paper, Sec. V: GPS updated at 1 Hz."""
-    gps_lag_s: float = 0.2
-    """Delay between a GPS fix and its delivery (s)."""
-    accel_std: float = 0.05
-    """Accelerometer noise, each axis (m/s^2)."""
-    gyro_std: float = 0.002
-    """Yaw-rate gyro noise (rad/s)."""
-    wheel_std: float = 0.05
-    """Wheel-speed noise, each wheel (rad/s)."""
-    eps_std: float = 0.001
-    """Steering-angle noise (rad)."""
-    gps_pos_std: float = 0.02
-    """GPS position noise, each axis (m)."""
-    gps_vel_std: float = 0.03
-    """GPS velocity noise, each axis (m/s)."""
-
-    def __post_init__(self) -> None:
-        for name in ("imu_rate_hz", "wheel_rate_hz", "eps_rate_hz", "gps_rate_hz"):
-            check(name, getattr(self, name), positive, "a positive rate (Hz)")
-        for name in ("gps_lag_s", "accel_std", "gyro_std", "wheel_std", "eps_std", "gps_pos_std", "gps_vel_std"):
-            check(name, getattr(self, name), non_negative, "a non-negative number")
 
 
 class Sensors:

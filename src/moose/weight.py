@@ -31,44 +31,14 @@ of the new value); a failed or late solve, or no threat, drops it to 0 at once.
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 from typing import Optional
 
 import numpy as np
 
-from .fbl import FblParams, FeedbackLinearization
-from .params import VehicleParams, check, positive, unit_interval
+from .fbl import FeedbackLinearization
+from .schema import WeightParams
 from .signals import Blend, PlanResult, StateEstimate, Threat
-
-
-@dataclasses.dataclass(frozen=True)
-class WeightParams:
-    """Thresholds (where a factor is ½) and slopes of the weight function."""
-
-    capped_factor: float = 0.7
-    """S for an iteration-capped MPC solution."""
-    rho_0: float = 0.85
-    """Steering-limit usage ρ at which L = ½."""
-    rho_slope: float = 0.05
-    tau_0: float = 1.6
-    """Time to collision at which T = ½ (s)."""
-    tau_slope: float = 0.2
-    """(s)"""
-    nu_0: float = 0.7
-    """Lateral steering index at which N = ½."""
-    nu_slope: float = 0.08
-    smoothing: float = 0.5
-    """Share of the new value in the first-order filter of w_MPC across planning steps (1: no filter)."""
-    n_rho: int = 3
-    """Steps of the MPC's plan whose steering demand enters ρ (≥ 1; 1: δ_MPC only)."""
-
-    def __post_init__(self) -> None:
-        check("capped_factor", self.capped_factor, unit_interval, "a factor in [0, 1]")
-        check("smoothing", self.smoothing, lambda v: 0.0 < v <= 1.0, "a share in (0, 1]")
-        for name in ("rho_0", "rho_slope", "tau_0", "tau_slope", "nu_0", "nu_slope"):
-            check(name, getattr(self, name), positive, "a positive number")
-        check("n_rho", self.n_rho, lambda v: isinstance(v, int) and v >= 1, "an integer of at least 1")
 
 
 STATUS_FACTOR = {"converged": 1.0}
@@ -83,10 +53,11 @@ def _sigma(z: float) -> float:
 class WeightFunction:
     """Blends MPC and MSF accelerations and produces the MPC's next initial guess."""
 
-    def __init__(self, params: WeightParams, vehicle: VehicleParams, fbl: Optional[FblParams] = None) -> None:
+    def __init__(self, params: WeightParams, fbl: FeedbackLinearization) -> None:
         self.params = params
-        self.vehicle = vehicle
-        self._fbl = FeedbackLinearization(fbl if fbl is not None else FblParams(), vehicle)
+        self.vehicle = fbl.vehicle
+        self._fbl = fbl
+        """The configured FBL: ρ uses the δ* it computes for the MPC's first acceleration."""
         self._previous: Optional[float] = None
 
     def reset(self) -> None:
@@ -126,14 +97,17 @@ class WeightFunction:
         w *= _sigma((p.nu_0 - threat.nu) / p.nu_slope) if not math.isnan(threat.nu) else 0.0
         return float(min(max(w, 0.0), 1.0))
 
-    def blend(self, mpc: PlanResult, msf: PlanResult, threat: Optional[Threat], estimate: StateEstimate) -> Blend:
-        """Filtered w_MPC and the row-wise convex combination of the two acceleration sequences."""
-        w = self.weight(mpc, threat, estimate)
+    def blend(self, mpc: Optional[PlanResult], msf: PlanResult, threat: Optional[Threat],
+              estimate: StateEstimate) -> Blend:
+        """Filtered w_MPC and the row-wise convex combination of the two acceleration sequences.
+
+        ``mpc`` None (no MPC plan in time) counts as a failed solve: weight 0 at once."""
+        w = self.weight(mpc, threat, estimate) if mpc is not None else 0.0
         if w > 0.0 and self._previous is not None:
             # a usable MPC solution's share changes gradually; a failed one drops out at once
             w = self._previous + self.params.smoothing * (w - self._previous)
         self._previous = w
-        if w == 0.0:
+        if w == 0.0 or mpc is None:
             return Blend(weight_mpc=0.0, accel=np.array(msf.accel, dtype=float, copy=True))
         return Blend(weight_mpc=w, accel=w * mpc.accel + (1.0 - w) * msf.accel)
 
