@@ -5,12 +5,14 @@ import math
 
 import pytest
 
-from moose.detector import DetectorParams, ObstacleDetector
-from moose.maneuver import ManeuverParams, MaxSteeringTable
+from moose.detector import ObstacleDetector
+from moose.maneuver import MaxSteeringTable
+from moose.paper import PAPER_FRICTION
 from moose.params import ParamError, VehicleParams
 from moose.signals import Obstacle, StateEstimate
+from moose.schema import DetectorParams, ManeuverParams
 
-VEHICLE = VehicleParams()
+VEHICLE = VehicleParams(mu=PAPER_FRICTION)  # the friction of the paper's nu
 
 
 @pytest.fixture(scope="module")

@@ -12,124 +12,28 @@ running maximum max_{φ ≤ t} y_max(φ) used for ν (see
 kinematic similarity of slow cornering (see :class:`MaxSteeringTable`), which
 also extends the table below its lowest speed down to y_max(t, 0) = 0.
 
-The paper does not state the friction its y_max used; ``ManeuverParams.mu_ymax``
-is calibrated against the paper's polynomial fit of Fig. 4 and the ν printed
-in Figs. 5–7 (:data:`PAPER_EXPERIMENTS`, :func:`calibration_errors`).
+The friction is the planning μ (the vehicle given to :meth:`MaxSteeringTable.build`), so ν is the
+lateral steering index of the car the stack believes it drives; the table is built once per μ.
+The paper does not state the friction its y_max used: :data:`moose.paper.PAPER_FRICTION` is the
+μ that reproduces its fit and its ν (:mod:`moose.calibration`).
 """
 from __future__ import annotations
 
-import dataclasses
 import math
+from functools import lru_cache
 from types import ModuleType
 from typing import Any, NamedTuple, Sequence, Union
 
 import casadi as ca
 import numpy as np
 
-from .params import VehicleParams, check, positive
+from .params import VehicleParams
+from .schema import ManeuverParams
 from .tire import pacejka
 
 ArrayLike = Union[float, np.ndarray]
 
 _EPS_V = 1e-9
-
-
-@dataclasses.dataclass(frozen=True)
-class ManeuverParams:
-    """Friction and grid of the y_max table.
-
-    Interpolation error of the default grid (10 ms × 0.25 m/s) in y_max,
-    measured against direct integration at off-grid points over 0.5–12 m/s:
-    < 7 mm for t < 3 s, < 0.6 % for t ∈ [0.5, 5) s, 1.6 % beyond (where the
-    low-friction maneuver spins the car and y_max bends sharply in v_x around
-    4–5 m/s).  The time step hardly matters (10 → 50 ms changes nothing
-    visible); 0.125 m/s steps give < 2.2 mm and 0.15 %, 0.5 m/s steps four
-    times the error.
-    """
-
-    mu_ymax: float = 0.3
-    """Friction used for y_max: calibrated against the paper's fit and ν values."""
-    t_max: float = 6.0
-    """Longest time answered (s); later times are clamped."""
-    dt_table: float = 0.01
-    """Time resolution of the table (s)."""
-    v_min: float = 0.5
-    """Lowest tabulated speed (m/s)."""
-    v_max: float = 12.0
-    """Highest tabulated speed (m/s)."""
-    dv_table: float = 0.25
-    """Speed resolution of the table (m/s)."""
-    dt_integration: float = 1e-3
-    """RK4 step used to build the table (s)."""
-
-    def __post_init__(self) -> None:
-        check("mu_ymax", self.mu_ymax, lambda v: 0.0 < v <= 2.0, "a friction coefficient in (0, 2]")
-        for name in ("t_max", "dt_table", "v_min", "dv_table"):
-            check(name, getattr(self, name), positive, "a positive number")
-        check("dt_integration", self.dt_integration, lambda v: 0.0 < v <= 1e-3, "an RK4 step in (0, 1e-3] s")
-        check("v_max", self.v_max, lambda v: v > self.v_min, f"a speed above v_min = {self.v_min}")
-        check("dt_table", self.dt_table, lambda v: _is_multiple(v, self.dt_integration),
-              f"a multiple of dt_integration = {self.dt_integration}")
-        check("t_max", self.t_max, lambda v: v >= 2 * self.dt_table, f"at least two table steps of {self.dt_table} s")
-
-
-def _is_multiple(value: float, unit: float) -> bool:
-    ratio = value / unit
-    return abs(ratio - round(ratio)) < 1e-6 and round(ratio) >= 1
-
-
-# --- the paper's own fit (reference data) -----------------------------------------------------
-
-PAPER_FIT_TERMS: tuple[tuple[float, int, int], ...] = (
-    (-0.8001, 0, 0), (0.4752, 1, 0), (2.1603, 0, 1), (-0.0481, 2, 0), (-1.1421, 1, 1),
-    (-1.3265, 0, 2), (0.0846, 2, 1), (0.6708, 1, 2), (0.2326, 0, 3), (-0.0183, 2, 2),
-    (-0.0592, 1, 3), (-0.0134, 0, 4),
-)
-"""(coefficient, power of v_x, power of t) of the polynomial ``yego(v, t)`` declared by
-``declare function`` in the TikZ code of the paper's Fig. "Maximum steering maneuver"
-(label ``fig:path``), copied verbatim."""
-
-
-def paper_y_max_fit(vx: ArrayLike, t: ArrayLike) -> ArrayLike:
-    """The paper's polynomial fit of y_max (m): ``yego(v, t)`` of Fig. "Maximum steering maneuver".
-
-    First argument v_x (m/s), second t (s): with this order the fit gives the ν
-    printed in Figs. 5–7 to two decimals (ν = w / yego(v_des, τ)).  Reference
-    data, not used by the planners: the quartic is not 0 at t = 0, dips below 0
-    around t = 0.5 s (yego(7, 0.5) < 0) and is flat (non-physical) at
-    v_x = 1 m/s; it is meaningful for t ∈ [1, 5] s, v_x ∈ [3, 7] m/s.
-    """
-    v = np.asarray(vx, dtype=float)
-    s = np.asarray(t, dtype=float)
-    out = sum(c * v**i * s**j for c, i, j in PAPER_FIT_TERMS)
-    return float(out) if np.ndim(out) == 0 else out
-
-
-class PaperExperiment(NamedTuple):
-    """One experiment of Figs. 5–7: speed, τ, far-edge width w of the drawn box, printed ν."""
-
-    vx: float
-    tau: float
-    w: float
-    nu: float
-    v_detect: float
-    """Speed at detection (m/s): 4.5 in the third 6 m/s case (the text), else vx."""
-    figure: str
-
-
-PAPER_EXPERIMENTS: tuple[PaperExperiment, ...] = (
-    PaperExperiment(5.0, 5.0, 4.0, 0.25, 5.0, "fig:exptx5"),
-    PaperExperiment(5.0, 4.0, 3.2, 0.26, 5.0, "fig:exptx5"),
-    PaperExperiment(5.0, 3.0, 2.4, 0.32, 5.0, "fig:exptx5"),
-    PaperExperiment(6.0, 3.0, 2.0, 0.21, 6.0, "fig:exptx6"),
-    PaperExperiment(6.0, 3.0, 2.4, 0.26, 6.0, "fig:exptx6"),
-    PaperExperiment(6.0, 3.0, 3.2, 0.34, 4.5, "fig:exptx6"),
-    PaperExperiment(7.0, 2.8, 2.0, 0.19, 7.0, "fig:exptx7"),
-    PaperExperiment(7.0, 2.0, 2.0, 0.40, 7.0, "fig:exptx7"),
-    PaperExperiment(7.0, 1.4, 2.0, 0.95, 7.0, "fig:exptx7"),
-)
-"""The nine experiments of the paper (Figs. 5–7).  The printed ν equals
-w / yego(vx, τ) in all nine (the 4.5 m/s case too: its ν was computed at 6 m/s)."""
 
 
 # --- integration of eq. (ymax) -----------------------------------------------------------------
@@ -218,8 +122,7 @@ def _integrate_numpy(vehicle: VehicleParams, mu: float, v: np.ndarray, n: int, d
     ys, vYs, aYs, thetas = (np.zeros((n_out, v.size)) for _ in range(4))
 
     def record(row: int, phi: float, state: np.ndarray) -> None:
-        # at φ = 0 the acceleration is the right limit (after the ramp): what the maneuver starts with
-        sdot = f(t_ramp if phi == 0.0 else phi, state)
+        sdot = f(phi, state)
         ys[row], thetas[row], vYs[row] = state[3], state[2], sdot[3]
         aYs[row] = _lateral_acceleration(state, sdot, v, np)
 
@@ -330,16 +233,20 @@ class MaxSteeringTable:
 
     @classmethod
     def build(cls, vehicle: VehicleParams, params: ManeuverParams | None = None) -> "MaxSteeringTable":
-        """Integrate eq. (ymax) on the grid of ``params`` (a few tenths of a second)."""
-        params = params or ManeuverParams()
+        """eq. (ymax) for ``vehicle`` (its μ, δ_max and δ̇_max) on the grid of ``params``, built once per
+        process for each (vehicle, grid): a few tenths of a second the first time."""
+        return _build_table(vehicle, params or ManeuverParams())
+
+    @classmethod
+    def _integrate(cls, vehicle: VehicleParams, params: ManeuverParams) -> "MaxSteeringTable":
         n_v = math.ceil((params.v_max - params.v_min) / params.dv_table - 1e-9) + 1  # the last speed ≥ v_max
         speeds = params.v_min + params.dv_table * np.arange(n_v)
         every = int(round(params.dt_table / params.dt_integration))
         # the lowest speed is also read at t (v_min + dv) / v_min by the similarity interpolation
         stretch = (params.v_min + params.dv_table) / params.v_min
         t_end = params.dt_table * math.ceil(params.t_max * stretch / params.dt_table - 1e-9)
-        prof = maneuver_profile(vehicle, params.mu_ymax, speeds, t_end, params.dt_integration, every)
-        return cls(prof.t, speeds, prof.y, prof.vY, prof.aY, params.mu_ymax, params.t_max)
+        prof = maneuver_profile(vehicle, vehicle.mu, speeds, t_end, params.dt_integration, every)
+        return cls(prof.t, speeds, prof.y, prof.vY, prof.aY, vehicle.mu, params.t_max)
 
     # -- interpolation ---------------------------------------------------------------------------
     def _scalar(self, name: str, t: float, vx: float, power: int) -> float:
@@ -427,6 +334,11 @@ class MaxSteeringTable:
         return self._query("reach", t, vx, 0)
 
 
+@lru_cache(maxsize=32)
+def _build_table(vehicle: VehicleParams, params: ManeuverParams) -> MaxSteeringTable:
+    return MaxSteeringTable._integrate(vehicle, params)
+
+
 def time_to_collision(distance: float, vx: float) -> float:
     """τ = distance / v_x (s), eq. (nudef)'s τ.
 
@@ -450,39 +362,3 @@ def lateral_steering_index(w: float, tau: float, vx: float, table: MaxSteeringTa
         return 0.0
     reach = float(table.reach(tau, vx)) if tau > 0.0 else 0.0
     return w / reach if reach > 1e-9 else math.inf
-
-
-# --- calibration of μ -----------------------------------------------------------------------------
-
-class CalibrationErrors(NamedTuple):
-    """How well the maneuver with a given μ reproduces the paper."""
-
-    mu: float
-    fit_rms: float
-    """RMS of y_max − yego over v ∈ {3, 5, 7} m/s (the plotted curves where the fit is meaningful), t ∈ [1, 5] s (m)."""
-    nu_rms: float
-    """RMS of ν − ν_paper over the nine experiments, ν at the speed the paper used (v_x)."""
-    nu: tuple[float, ...]
-    """ν of the nine experiments at the paper's v_x."""
-    nu_detect: tuple[float, ...]
-    """ν at the speed at detection (differs only for the 4.5 m/s case)."""
-
-
-def calibration_errors(vehicle: VehicleParams, mu: float, dt: float = 1e-3) -> CalibrationErrors:
-    """Compare eq. (ymax) integrated with friction ``mu`` to the paper's fit and printed ν."""
-    speeds = sorted({3.0, 5.0, 7.0} | {e.vx for e in PAPER_EXPERIMENTS} | {e.v_detect for e in PAPER_EXPERIMENTS})
-    every = max(1, int(round(0.01 / dt)))
-    prof = maneuver_profile(vehicle, mu, speeds, 5.0, dt, every)
-
-    def y_at(t: ArrayLike, v: float) -> np.ndarray:
-        return np.interp(t, prof.t, prof.y[:, speeds.index(v)])
-
-    def reach_at(t: float, v: float) -> float:
-        return float(np.interp(t, prof.t, np.maximum.accumulate(prof.y[:, speeds.index(v)])))
-
-    ts = np.arange(1.0, 5.0 + 1e-9, 0.1)
-    errors = np.concatenate([y_at(ts, v) - paper_y_max_fit(v, ts) for v in (3.0, 5.0, 7.0)])
-    nu = tuple(e.w / reach_at(e.tau, e.vx) for e in PAPER_EXPERIMENTS)
-    nu_detect = tuple(e.w / reach_at(e.tau, e.v_detect) for e in PAPER_EXPERIMENTS)
-    nu_rms = math.sqrt(sum((a - e.nu) ** 2 for a, e in zip(nu, PAPER_EXPERIMENTS)) / len(nu))
-    return CalibrationErrors(mu, float(np.sqrt(np.mean(errors**2))), nu_rms, nu, nu_detect)

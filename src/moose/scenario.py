@@ -18,8 +18,10 @@ from typing import Any, Optional
 
 import yaml
 
-from .params import ParamError, build, check, non_negative, positive
+from .params import ParamError, build, check, non_negative, positive, replace
+from .paper import PAPER_FRICTION
 from .resources import SCENARIO_DIR
+from .schema import Config
 from .signals import Obstacle as Box
 
 
@@ -56,7 +58,8 @@ class Scenario:
     lead_time: float = 1.0
     """Straight running before the obstacle appears (s)."""
     mu: Optional[float] = None
-    """Friction of the plant; ``None`` keeps the configured vehicle μ."""
+    """The road's friction (the plant's); ``None`` keeps the configured ``vehicle.mu``.  In a file,
+    ``paper`` is the friction calibrated to the paper's ν (:data:`moose.paper.PAPER_FRICTION`)."""
     description: str = ""
     paper: PaperReference = PaperReference()
 
@@ -81,13 +84,30 @@ class Scenario:
 
     @property
     def x_appear(self) -> float:
-        """CoG position x at which the obstacle appears: x_min − v_init τ (m)."""
+        """Nominal CoG position x at which the obstacle appears, x_min − v_init τ (m): where the car
+        cruising at ``v_init`` is when :meth:`appears` turns true."""
         return self.obstacle.x_min - self.v_init * self.tau
 
     @property
     def start_x(self) -> float:
-        """CoG position x at the start of the run (m)."""
+        """CoG position x at the start of the run (m): ``lead_time`` before :attr:`x_appear` at ``v_init``."""
         return self.x_appear - self.v_init * self.lead_time
+
+    def appears(self, x: float, vx: float) -> bool:
+        """Whether the obstacle has appeared for a car at (true) position ``x`` and speed ``vx``: when its
+        time to collision with the near edge, (x_min − x) / v_x, has fallen to ``tau`` (or the car is
+        there).  Placing the obstacle from the car's actual state gives every planner the same τ."""
+        gap = self.obstacle.x_min - x
+        return gap <= self.tau * vx or gap <= 0.0
+
+    def configure(self, config: Config) -> Config:
+        """``config`` on this scenario's road: ``vehicle.mu`` set to the scenario's μ when it has one."""
+        return config if self.mu is None else dataclasses.replace(config, vehicle=replace(config.vehicle, mu=self.mu))
+
+    def desired_speed(self, detected: bool) -> float:
+        """v_des of the planners: the approach speed ``v_init`` until the obstacle is detected (every
+        planner meets it at the same speed, hence the same ν), ``v_des`` from then on."""
+        return self.v_des if detected else self.v_init
 
     @property
     def danger_zone(self) -> Box:
@@ -96,9 +116,14 @@ class Scenario:
 
 
 def scenario_from_mapping(data: Any, where: str = "scenario") -> Scenario:
-    """Validate a parsed scenario file; errors name the field and the value."""
+    """Validate a parsed scenario file; errors name the field and the value.
+
+    ``mu: paper`` stands for :data:`moose.paper.PAPER_FRICTION`, the friction calibrated to
+    reproduce the paper's ν (the paper's own scenarios use it)."""
     if not isinstance(data, dict):
         raise ParamError(f"{where} = {data!r} is invalid: expected a mapping")
+    if data.get("mu") == "paper":
+        data = {**data, "mu": PAPER_FRICTION}
     return build(Scenario, data, where)
 
 
