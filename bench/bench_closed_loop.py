@@ -10,24 +10,22 @@ import dataclasses
 import time
 
 from moose.config import load_config
-from moose.maneuver import MaxSteeringTable
 from moose.scenario import load_scenario
 from moose.simulation import simulate
 
 
 def main() -> None:
     config = load_config()
-    table = MaxSteeringTable.build(config.vehicle, config.maneuver)
     scenario = dataclasses.replace(load_scenario("paper_v7_tau1.4"), lead_time=1.0, duration=9.0)
     simulated = scenario.lead_time + scenario.duration
     print(f"closed loop, {simulated:.0f} s simulated (plant 1 kHz, control 100 Hz, planning 5 Hz)")
     print(f"{'planner':>10} {'wall s':>8} {'real-time factor':>17}")
     for planner in ("combined", "mpc", "msf"):
-        simulate(config, scenario, planner, seed=0, table=table)  # warm-up (CasADi set-up)
+        simulate(config, scenario, planner, seed=0)  # warm-up (CasADi set-up, the maneuver table)
         best = float("inf")
         for _ in range(3):
             start = time.perf_counter()
-            simulate(config, scenario, planner, seed=0, table=table)
+            simulate(config, scenario, planner, seed=0)
             best = min(best, time.perf_counter() - start)
         print(f"{planner:>10} {best:8.3f} {simulated / best:16.1f}x")
 

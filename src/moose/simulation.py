@@ -2,9 +2,9 @@
 
 Rates (``SimulationParams``): the plant is integrated at 1 kHz; sensors,
 observer, detector and motion control run at 100 Hz (GPS at 1 Hz with its lag);
-MPC, MSF, the weight function and the FBL run at 5 Hz, the MicroLabBox's rate,
-and re-plan at once when the detector reports a new obstacle (the 5 Hz phase
-restarts there).  Each planning instant uses the estimate of that instant and its result acts
+MPC, MSF, the weight function and the FBL run every t_s = 0.2 s (5 Hz, the
+MicroLabBox's rate; :class:`moose.planning.PlanningStep`), and re-plan at once
+when the detector reports a new obstacle (the planning period restarts there).  Each planning instant uses the estimate of that instant and its result acts
 from that motion tick on (zero compute latency in lockstep; the node graph has
 the real one).  All randomness comes from one seeded generator, so a run is
 a function of (configuration, scenario, planner mode, seed) — except a planning
@@ -18,20 +18,16 @@ from typing import Optional
 
 import numpy as np
 
-from .config import Config, PlannerMode
 from .detector import ObstacleDetector
-from .fbl import FeedbackLinearization
 from .maneuver import MaxSteeringTable
 from .motion import MotionController
-from .mpc import MpcPlanner
-from .msf import MsfPlanner
 from .observer import StateObserver
-from .params import replace
+from .planning import PlanningRecord, PlanningStep, new_obstacle
 from .scenario import Scenario
+from .schema import Config, PlannerMode
 from .sensors import Sensors
-from .signals import Blend, EpsSample, PlannerInput, PlanResult, Reference, StateEstimate, Threat
+from .signals import EpsSample, Reference, StateEstimate, Threat
 from .vehicle import VehiclePlant, initial_state
-from .weight import WeightFunction
 
 TRACE_FIELDS = (
     "t", "x", "y", "theta", "vx", "vy", "gamma", "delta", "omega_rl", "omega_rr",
@@ -39,20 +35,6 @@ TRACE_FIELDS = (
     "delta_ref", "delta_mpc", "vx_ref", "weight_mpc", "u_delta_rate", "u_T_rl", "u_T_rr", "threat",
 )
 """Columns of :attr:`SimulationResult.trace`, sampled at the motion-control rate."""
-
-
-@dataclasses.dataclass(frozen=True)
-class PlanningRecord:
-    """One 5 Hz planning instant."""
-
-    t: float
-    threat: Optional[Threat]
-    mpc: Optional[PlanResult]
-    msf: Optional[PlanResult]
-    blend: Blend
-    reference: Reference
-    delta_mpc: float
-    """δ* the FBL computes from the MPC's own first acceleration (the paper's δ_MPC)."""
 
 
 @dataclasses.dataclass
@@ -65,6 +47,10 @@ class SimulationResult:
     trace: dict[str, np.ndarray]
     planning: list[PlanningRecord]
     first_threat: Optional[Threat]
+    config: Config
+    """The configuration of the run, with the road's μ in ``vehicle.mu`` (the scenario's, if it sets one)."""
+    end_time: float
+    """Time the run was planned to end (s): lead time + duration."""
     samples: list = dataclasses.field(default_factory=list)
     """Every sensor sample delivered to the observer, in order (for bags and replay)."""
     estimates: list = dataclasses.field(default_factory=list)
@@ -82,7 +68,12 @@ class _Row:
 
 
 class ClosedLoop:
-    """The moose test in lockstep: build once, :meth:`run` once."""
+    """The moose test in lockstep: build once, :meth:`run` once.
+
+    The road's μ is the scenario's when it sets one, else ``vehicle.mu``; the stack assumes the
+    planning μ (:attr:`moose.schema.Config.mu_planning`), which equals the road's unless
+    ``planning.mu_estimate`` sets a deliberate mismatch.
+    """
 
     def __init__(
         self,
@@ -92,35 +83,33 @@ class ClosedLoop:
         seed: int = 0,
         table: MaxSteeringTable | None = None,
     ) -> None:
-        vehicle = config.vehicle if scenario.mu is None else replace(config.vehicle, mu=scenario.mu)
-        self.config = dataclasses.replace(config, vehicle=vehicle)
+        self.config = config = scenario.configure(config)
+        vehicle = config.vehicle
         self.scenario = scenario
         self.mode: PlannerMode = planner or config.simulation.planner
         self.seed = seed
-        sim = config.simulation
-        self.table = table if table is not None else MaxSteeringTable.build(vehicle, config.maneuver)
-        self.plant = VehiclePlant(vehicle, dt=sim.plant_dt)
+        model = config.model_vehicle
+        self.table = table if table is not None else MaxSteeringTable.build(model, config.maneuver)
+        if self.table.mu != model.mu:
+            raise ValueError(f"table.mu = {self.table.mu!r} is invalid: the planning μ is {model.mu!r}")
+        self.plant = VehiclePlant(vehicle, dt=config.simulation.plant_dt)
         self.sensors = Sensors(config.sensors, vehicle, np.random.default_rng(seed))
         self.detector = ObstacleDetector(config.detector, self.table)
-        self.mpc = MpcPlanner(config.mpc, vehicle) if self.mode != "msf" else None
-        self.msf = MsfPlanner(config.msf, self.table, vehicle) if self.mode != "mpc" else None
-        self.weight = WeightFunction(config.weight, vehicle)
-        self.fbl = FeedbackLinearization(config.fbl, vehicle)
-        self.motion = MotionController(config.motion, vehicle)
+        self.step = PlanningStep(config, self.mode, self.table)
+        self.motion = MotionController(config.motion, model)
         x0 = initial_state(vehicle, x=scenario.start_x, vx=scenario.v_init)
         self.plant.reset(x0)
-        self.observer = StateObserver(config.observer, vehicle, initial=_estimate_of(0.0, x0))
+        self.observer = StateObserver(config.observer, model, initial=_estimate_of(0.0, x0))
 
     def run(self) -> SimulationResult:
         sim = self.config.simulation
         dt_motion = 1.0 / sim.motion_rate_hz
-        n_motion = int(round((self.scenario.lead_time + self.scenario.duration) * sim.motion_rate_hz))
+        end_time = self.scenario.lead_time + self.scenario.duration
+        n_motion = int(round(end_time * sim.motion_rate_hz))
         trace = np.full((n_motion + 1, len(TRACE_FIELDS)), np.nan)
         planning: list[PlanningRecord] = []
         appeared = False
         first_threat: Optional[Threat] = None
-        guess: Optional[np.ndarray] = None
-        applied = np.zeros(2)
         reference = Reference(delta=0.0, vx=self.scenario.v_init)
         row = _Row(vx_ref=self.scenario.v_init)
         delta_meas = 0.0
@@ -141,26 +130,23 @@ class ClosedLoop:
                     delta_meas = sample.delta
             estimate = self.observer.estimate()
             estimates.append(estimate)
-            appeared = appeared or state[0] >= self.scenario.x_appear
+            appeared = appeared or self.scenario.appears(float(state[0]), float(state[3]))
             visible = [self.scenario.danger_zone] if appeared else []
             previous = threat
             threat = self.detector.update(t, estimate, visible)
             threats.append((t, threat))
             if threat is not None and first_threat is None:
                 first_threat = threat
-            new_obstacle = threat is not None and (previous is None or previous.obstacle != threat.obstacle)
-            planned = k >= next_plan or new_obstacle
-            if planned:
-                next_plan = k + sim.motion_steps_per_plan
-                record = self._plan(t, estimate, threat, guess)
+            replan = new_obstacle(previous, threat)
+            if k >= next_plan or replan:
+                next_plan = k + self.config.motion_steps_per_plan
+                v_des = self.scenario.desired_speed(first_threat is not None)
+                record = self.step.plan(t, estimate, threat, v_des)
                 planning.append(record)
-                guess = self.weight.next_initial_guess(record.blend)
-                applied = record.blend.accel[0]
                 reference = record.reference
                 row = _Row(reference.delta, record.delta_mpc, reference.vx, record.blend.weight_mpc)
-            if sim.steering_fbl_at_motion_rate and not planned:
-                held = self.fbl.reference(applied, estimate)
-                reference = Reference(delta=held.delta, vx=reference.vx)
+            else:
+                reference = self.step.reference_between(estimate) or reference
                 row.delta_ref = reference.delta
             u = self.motion.step(reference, estimate, delta_meas, dt_motion)
             trace[k] = (
@@ -172,26 +158,8 @@ class ClosedLoop:
                 self.plant.step(u, sim.plant_steps_per_motion)
         columns = {name: trace[:, i].copy() for i, name in enumerate(TRACE_FIELDS)}
         return SimulationResult(self.scenario, self.mode, self.seed, columns, planning, first_threat,
+                                self.config, end_time,
                                 samples, estimates, threats)
-
-    def _plan(
-        self, t: float, estimate: StateEstimate, threat: Optional[Threat], guess: Optional[np.ndarray]
-    ) -> PlanningRecord:
-        inp = PlannerInput(t=t, estimate=estimate, threat=threat, v_des=self.scenario.v_des, initial_guess=guess, y_lane=0.0)
-        mpc = self.mpc.plan(inp) if self.mpc is not None else None
-        msf = self.msf.plan(inp) if self.msf is not None else None
-        if self.mode == "combined":
-            assert mpc is not None and msf is not None
-            blend = self.weight.blend(mpc, msf, threat, estimate)
-        elif self.mode == "mpc":
-            assert mpc is not None
-            blend = Blend(weight_mpc=1.0, accel=mpc.accel)
-        else:
-            assert msf is not None
-            blend = Blend(weight_mpc=0.0, accel=msf.accel)
-        reference = self.fbl.reference(blend.accel[0], estimate)
-        delta_mpc = self.fbl.reference(mpc.accel[0], estimate).delta if mpc is not None else float("nan")
-        return PlanningRecord(t, threat, mpc, msf, blend, reference, delta_mpc)
 
 
 def _estimate_of(t: float, state: np.ndarray) -> StateEstimate:

@@ -369,21 +369,12 @@ def replan(path: str | Path, config: Any, planner: str = "combined", v_des: Opti
     """
     import numpy as np
 
-    from moose.fbl import FeedbackLinearization
-    from moose.maneuver import MaxSteeringTable
-    from moose.mpc import MpcPlanner
-    from moose.msf import MsfPlanner
-    from moose.signals import Blend, PlannerInput
-    from moose.weight import WeightFunction
+    from moose.planning import PlanningStep
 
     from . import convert as cv
 
-    table = MaxSteeringTable.build(config.vehicle, config.maneuver)
-    mpc = MpcPlanner(config.mpc, config.vehicle) if planner != "msf" else None
-    msf = MsfPlanner(config.msf, table, config.vehicle) if planner != "mpc" else None
-    weight = WeightFunction(config.weight, config.vehicle)
-    fbl = FeedbackLinearization(config.fbl, config.vehicle)
-    estimate = threat = guess = None
+    step = PlanningStep(config, planner)
+    estimate = threat = None
     recorded_plans: dict[str, dict[float, Any]] = {"mpc": {}, "msf": {}}
     rows = []
     for m in read_bag(path, ["/perception/state", "/perception/threat", "/planning/mpc", "/planning/msf", "/planning/blend"]):
@@ -397,23 +388,15 @@ def replan(path: str | Path, config: Any, planner: str = "combined", v_des: Opti
             recorded_plans[msg.planner][round(cv.time_of(msg), 6)] = cv.plan_from_msg(msg)
         elif estimate is not None:
             t = cv.time_of(msg)
-            inp = PlannerInput(t, estimate, threat, float(v_des), guess)
-            new_mpc = mpc.plan(inp) if mpc is not None else None
-            new_msf = msf.plan(inp) if msf is not None else None
-            if planner == "combined":
-                blend = weight.blend(new_mpc, new_msf, threat, estimate)
-            elif planner == "mpc":
-                blend = Blend(1.0, new_mpc.accel)
-            else:
-                blend = Blend(0.0, new_msf.accel)
-            guess = weight.next_initial_guess(blend)
+            record = step.plan(t, estimate, threat, float(v_des))
+            blend, new_mpc = record.blend, record.mpc
             old_mpc = recorded_plans["mpc"].get(round(t, 6))
             rows.append({
                 "t": t,
                 "recorded_weight": msg.weight_mpc, "weight": blend.weight_mpc,
                 "recorded_ax": msg.accel_x[0], "ax": float(blend.accel[0, 0]),
                 "recorded_ay": msg.accel_y[0], "ay": float(blend.accel[0, 1]),
-                "recorded_delta": msg.delta_ref, "delta": fbl.reference(blend.accel[0], estimate).delta,
+                "recorded_delta": msg.delta_ref, "delta": record.reference.delta,
                 "recorded_mpc_status": old_mpc.status if old_mpc is not None else "",
                 "mpc_status": new_mpc.status if new_mpc is not None else "",
                 "mpc_solve_ms": new_mpc.solve_time_s * 1e3 if new_mpc is not None else math.nan,

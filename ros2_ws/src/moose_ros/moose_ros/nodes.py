@@ -15,19 +15,20 @@ from typing import Any, Callable, Optional, Sequence
 import numpy as np
 import yaml
 
-from moose.config import Config, config_from_mapping
+from moose.config import config_from_mapping
 from moose.detector import ObstacleDetector
-from moose.fbl import FeedbackLinearization
 from moose.maneuver import MaxSteeringTable
 from moose.motion import MotionController
 from moose.mpc import MpcPlanner
 from moose.msf import MsfPlanner
 from moose.observer import StateObserver
-from moose.params import ParamError, replace
+from moose.params import ParamError
 from moose.scenario import adhoc_scenario, load_scenario
 from moose.sensors import Sensors
 from moose.signals import Blend, EpsSample, GpsSample, ImuSample, PlannerInput, Reference, StateEstimate, WheelSpeedSample
+from moose.schema import Config
 from moose.vehicle import VehiclePlant, initial_state
+from moose.planning import PlanningStep, new_obstacle
 from moose.weight import WeightFunction
 
 from . import convert as cv
@@ -45,6 +46,8 @@ class GraphNode:
         self.rt = rt
         known = {f.name for f in dataclasses.fields(Config)}
         self.config = config_from_mapping({k: v for k, v in rt.parameters.items() if k in known}, where=f"{self.name} parameters")
+        if rt.param("scenario") is not None or rt.param("speed") is not None:
+            self.config = scenario_from_params(rt).configure(self.config)  # the simulated road's μ
         # transient local: a late joiner (the simulator waiting for the graph) sees each node's last status
         self._diag = rt.publisher("diagnostic_msgs/msg/DiagnosticArray", "/diagnostics", QOS_LATCHED)
         self.level, self.message, self.values = OK, "running", {}
@@ -54,7 +57,7 @@ class GraphNode:
         self._diag(cv.diagnostic_to_msg(self.rt, self.rt.now(), self.name, self.level, self.message, self.values))
 
     def table(self) -> MaxSteeringTable:
-        return MaxSteeringTable.build(self.config.vehicle, self.config.maneuver)
+        return MaxSteeringTable.build(self.config.model_vehicle, self.config.maneuver)
 
 
 def sensor_publishers(rt: Any) -> dict[type, tuple[Callable[[Any], None], Callable[[Any, Any], Any]]]:
@@ -137,7 +140,7 @@ class VehicleSimulator(GraphNode):
     def __init__(self, rt: Any) -> None:
         super().__init__(rt)
         self.scenario = scenario_from_params(rt)
-        vehicle = self.config.vehicle if self.scenario.mu is None else replace(self.config.vehicle, mu=self.scenario.mu)
+        vehicle = self.config.vehicle
         self.plant = VehiclePlant(vehicle, dt=self.config.simulation.plant_dt)
         self.plant.reset(initial_state(vehicle, x=self.scenario.start_x, vx=self.scenario.v_init))
         self.sensors = Sensors(self.config.sensors, vehicle, np.random.default_rng(int(rt.param("seed", 0))))
@@ -186,7 +189,7 @@ class VehicleSimulator(GraphNode):
         for sample in self.sensors.sample(t, state, self.plant.imu_specific_force(state, u)):
             self.io.send(sample, t)
         self.pub["odom"](cv.odometry_to_msg(rt, t, state))
-        if not self.appeared and state[0] >= self.scenario.x_appear:
+        if not self.appeared and self.scenario.appears(float(state[0]), float(state[3])):
             self.appeared = True
             self.pub["obstacles"](cv.obstacles_to_msg(rt, t, [self.scenario.danger_zone]))
         self.values = {"t": f"{t:.2f}", "x": f"{state[0]:.2f}", "y": f"{state[1]:.2f}"}
@@ -210,7 +213,7 @@ class Observer(GraphNode):
         super().__init__(rt)
         scenario = scenario_from_params(rt)
         start = initial_state(self.config.vehicle, x=scenario.start_x, vx=scenario.v_init)
-        self.observer = StateObserver(self.config.observer, self.config.vehicle,
+        self.observer = StateObserver(self.config.observer, self.config.model_vehicle,
                                       StateEstimate(0.0, start[0], 0.0, 0.0, scenario.v_init, 0.0, 0.0, 0.0))
         self.pub = rt.publisher("moose_msgs/msg/StateEstimate", "/perception/state", QOS_DEFAULT)
         self.dropped = 0
@@ -257,8 +260,9 @@ class Planner(GraphNode):
         super().__init__(rt)
         self.kind = kind
         cfg = self.config
-        self.planner = MpcPlanner(cfg.mpc, cfg.vehicle) if kind == "mpc" else MsfPlanner(cfg.msf, self.table(), cfg.vehicle)
-        self.v_des = float(rt.param("v_des", scenario_from_params(rt).v_des))
+        self.planner = MpcPlanner(cfg.mpc, cfg.grid) if kind == "mpc" else MsfPlanner(cfg.msf, cfg.grid, self.table())
+        self.scenario = scenario_from_params(rt)
+        self.seen_threat = False
         self.estimate: Optional[StateEstimate] = None
         self.threat = None
         self.guess: Optional[np.ndarray] = None
@@ -269,12 +273,13 @@ class Planner(GraphNode):
         rt.subscription("moose_msgs/msg/Blend", "/planning/blend",
                         lambda m: setattr(self, "guess", WeightFunction.next_initial_guess(Blend(m.weight_mpc, cv.blend_accel(m)))),
                         QOS_DEFAULT)
-        rt.timer(1.0 / cfg.simulation.planning_rate_hz, self.plan)
+        rt.timer(1.0 / cfg.planning_rate_hz, self.plan)
 
     def on_threat(self, msg: Any) -> None:
         threat = cv.threat_from_msg(msg)
-        new = threat is not None and (self.threat is None or self.threat.obstacle != threat.obstacle)
+        new = new_obstacle(self.threat, threat)
         self.threat = threat
+        self.seen_threat = self.seen_threat or threat is not None
         if new:
             self.plan()
 
@@ -282,7 +287,8 @@ class Planner(GraphNode):
         if self.estimate is None:
             return
         t = self.rt.now()
-        inp = PlannerInput(t, self.estimate, self.threat, self.v_des, self.guess, y_lane=0.0)
+        inp = PlannerInput(t, self.estimate, self.threat, self.scenario.desired_speed(self.seen_threat), self.guess,
+                           y_lane=0.0)
         result = self.planner.plan(inp)
         self.values = {"status": result.status, "solve_ms": f"{result.solve_time_s * 1e3:.2f}"}
         self.level = OK if result.status in ("converged", "capped", "ok", "idle") else WARN
@@ -297,15 +303,12 @@ class WeightFbl(GraphNode):
     def __init__(self, rt: Any) -> None:
         super().__init__(rt)
         cfg = self.config
-        self.mode = str(rt.param("planner", cfg.simulation.planner))
-        self.weight = WeightFunction(cfg.weight, cfg.vehicle)
-        self.fbl = FeedbackLinearization(cfg.fbl, cfg.vehicle)
+        self.step = PlanningStep(cfg, str(rt.param("planner", cfg.simulation.planner)), planners=False)  # type: ignore[arg-type]
+        self.mode = self.step.mode
         self.mpc_timeout = float(rt.param("mpc_timeout", 0.1))
         self.estimate: Optional[StateEstimate] = None
         self.threat = None
         self.pending: dict[str, tuple[float, Any]] = {}
-        self.applied: Optional[np.ndarray] = None
-        self.reference: Optional[Reference] = None
         self.last_mpc = -math.inf
         self.pub_blend = rt.publisher("moose_msgs/msg/Blend", "/planning/blend", QOS_DEFAULT)
         self.pub_ref = rt.publisher("moose_msgs/msg/Reference", "/control/reference", QOS_DEFAULT)
@@ -325,33 +328,33 @@ class WeightFbl(GraphNode):
             return
         mpc, msf = self.pending.get("mpc"), self.pending.get("msf")
         if self.mode == "mpc" and mpc:
-            t, blend = mpc[0], Blend(1.0, mpc[1].accel)
+            t, plans = mpc[0], (mpc[1], None)
         elif self.mode == "msf" and msf:
-            t, blend = msf[0], Blend(0.0, msf[1].accel)
+            t, plans = msf[0], (None, msf[1])
         elif self.mode == "combined" and msf and mpc and abs(mpc[0] - msf[0]) < 1e-6:
-            t, blend = msf[0], self.weight.blend(mpc[1], msf[1], self.threat, self.estimate)
+            t, plans = msf[0], (mpc[1], msf[1])
         elif self.mode == "combined" and msf and self.rt.now() - self.last_mpc > self.mpc_timeout + 0.2:
-            # MPC silent: blend with a failed MPC (weight 0) and say so
-            t, blend = msf[0], Blend(0.0, msf[1].accel)
+            # MPC silent: blend without it (weight 0) and say so
+            t, plans = msf[0], (None, msf[1])
             self.level, self.message = WARN, "mpc_planner silent: MSF only"
         else:
             return
+        record = self.step.combine(t, self.estimate, self.threat, *plans)
+        blend = record.blend
         if self.mode != "combined" or not self.message.startswith("mpc_planner silent") or blend.weight_mpc > 0.0:
             self.level, self.message = OK, "running"
         self.pending.clear()
-        self.applied = blend.accel[0]
-        self.reference = self.fbl.reference(self.applied, self.estimate)
         self.values = {"weight_mpc": f"{blend.weight_mpc:.3f}"}
-        self.pub_blend(cv.blend_to_msg(self.rt, t, blend, self.reference))
-        self.pub_ref(cv.reference_to_msg(self.rt, t, self.reference))
+        self.pub_blend(cv.blend_to_msg(self.rt, t, blend, record.reference))
+        self.pub_ref(cv.reference_to_msg(self.rt, t, record.reference))
 
     def on_state(self, msg: Any) -> None:
         self.estimate = cv.estimate_from_msg(msg)
         if "msf" in self.pending and self.mode == "combined":
             self.try_blend()
-        if self.applied is not None and self.reference is not None and self.config.simulation.steering_fbl_at_motion_rate:
-            delta = self.fbl.reference(self.applied, self.estimate).delta
-            self.pub_ref(cv.reference_to_msg(self.rt, self.estimate.t, Reference(delta, self.reference.vx)))
+        reference = self.step.reference_between(self.estimate)
+        if reference is not None and self.config.simulation.steering_fbl_at_motion_rate:
+            self.pub_ref(cv.reference_to_msg(self.rt, self.estimate.t, reference))
 
 
 class Motion(GraphNode):
@@ -365,7 +368,7 @@ class Motion(GraphNode):
 
     def __init__(self, rt: Any) -> None:
         super().__init__(rt)
-        self.controller = MotionController(self.config.motion, self.config.vehicle)
+        self.controller = MotionController(self.config.motion, self.config.model_vehicle)
         self.estimate: Optional[StateEstimate] = None
         self.reference: Optional[Reference] = None
         self.delta = 0.0

@@ -1,0 +1,124 @@
+"""One planning instant of Fig. 3: the MPC and MSF plans, the weight function's blend, the FBL
+reference, the MPC's next initial guess, and the re-plan trigger.
+
+Every place that plans goes through :class:`PlanningStep`: the lockstep loop
+(:mod:`moose.simulation`), the ``weight_fbl`` node of the graph (whose planners run in their own
+processes and hand their plans to :meth:`PlanningStep.combine`) and ``moose bag replan``.  So the
+node graph reproduces the lockstep loop by construction, not by care.
+
+* Mode: ``combined`` blends the two plans with the weight function (a missing MPC plan — failed,
+  late or silent — blends as weight 0, i.e. the MSF plan); ``mpc`` and ``msf`` apply one planner.
+* The blended first acceleration goes to the FBL (δ*, v_x*); between planning instants δ* is
+  re-evaluated at the motion-control rate on the held acceleration with the newest estimate
+  (``simulation.steering_fbl_at_motion_rate``), v_x* is held.
+* The blend shifted by one step is the MPC's next initial guess (Fig. 3, dashed arrow).
+* Re-plan trigger (:func:`new_obstacle`): a threat from an obstacle that was not the threat at the
+  previous tick re-plans at once and restarts the planning period.
+"""
+from __future__ import annotations
+
+import dataclasses
+from typing import Optional
+
+import numpy as np
+
+from .fbl import FeedbackLinearization
+from .maneuver import MaxSteeringTable
+from .mpc import MpcPlanner
+from .msf import MsfPlanner
+from .schema import Config, PlannerMode
+from .signals import Blend, PlannerInput, PlanResult, Reference, StateEstimate, Threat
+from .weight import WeightFunction
+
+
+@dataclasses.dataclass(frozen=True)
+class PlanningRecord:
+    """What one planning instant produced."""
+
+    t: float
+    threat: Optional[Threat]
+    mpc: Optional[PlanResult]
+    msf: Optional[PlanResult]
+    blend: Blend
+    reference: Reference
+    delta_mpc: float
+    """δ* the FBL computes from the MPC's own first acceleration (the paper's δ_MPC); NaN without an MPC plan."""
+
+
+def new_obstacle(previous: Optional[Threat], current: Optional[Threat]) -> bool:
+    """The re-plan trigger: ``current`` is a threat from another obstacle than ``previous`` (or the first)."""
+    return current is not None and (previous is None or previous.obstacle != current.obstacle)
+
+
+class PlanningStep:
+    """The planners, the weight function and the FBL of one configuration, and what a planning instant
+    leaves for the next: the held acceleration, the reference and the MPC's initial guess.
+
+    ``planners=False`` builds only the combining part (weight function and FBL): the ``weight_fbl``
+    node, whose planners are other processes.
+    """
+
+    def __init__(self, config: Config, mode: PlannerMode | None = None, table: Optional[MaxSteeringTable] = None,
+                 planners: bool = True) -> None:
+        self.mode: PlannerMode = mode or config.simulation.planner
+        self.grid = config.grid
+        model = config.model_vehicle
+        self.fbl = FeedbackLinearization(config.fbl, model, self.grid.t_s)
+        self.weight = WeightFunction(config.weight, self.fbl)
+        self.mpc: Optional[MpcPlanner] = None
+        self.msf: Optional[MsfPlanner] = None
+        if planners and self.mode != "msf":
+            self.mpc = MpcPlanner(config.mpc, self.grid)
+        if planners and self.mode != "mpc":
+            self.msf = MsfPlanner(config.msf, self.grid, table or MaxSteeringTable.build(model, config.maneuver))
+        self.fbl_at_motion_rate = config.simulation.steering_fbl_at_motion_rate
+        self.guess: Optional[np.ndarray] = None
+        """(N_p, 2) initial guess of the next MPC solve: the last blend shifted by one step."""
+        self.applied: Optional[np.ndarray] = None
+        """The blended first acceleration [v̇_X*, v̇_Y*] held until the next planning instant."""
+        self.reference: Optional[Reference] = None
+        """The FBL reference of the last planning instant."""
+
+    def planner_input(self, t: float, estimate: StateEstimate, threat: Optional[Threat], v_des: float) -> PlannerInput:
+        """What both planners receive at ``t`` (the MPC's guess is the shifted previous blend)."""
+        return PlannerInput(t=t, estimate=estimate, threat=threat, v_des=v_des, initial_guess=self.guess, y_lane=0.0)
+
+    def plan(self, t: float, estimate: StateEstimate, threat: Optional[Threat], v_des: float) -> PlanningRecord:
+        """Run the mode's planners at ``t`` and :meth:`combine` their plans."""
+        inp = self.planner_input(t, estimate, threat, v_des)
+        mpc = self.mpc.plan(inp) if self.mpc is not None else None
+        msf = self.msf.plan(inp) if self.msf is not None else None
+        return self.combine(t, estimate, threat, mpc, msf)
+
+    def combine(self, t: float, estimate: StateEstimate, threat: Optional[Threat], mpc: Optional[PlanResult],
+                msf: Optional[PlanResult]) -> PlanningRecord:
+        """The blend of the mode, the FBL reference and the next initial guess from the plans of one instant.
+
+        ``combined`` needs the MSF plan; without an MPC plan it blends with weight 0.  ``mpc`` and
+        ``msf`` need their own plan.  A missing plan that the mode needs raises ``ValueError``.
+        """
+        if self.mode == "mpc":
+            if mpc is None:
+                raise ValueError("mode mpc needs an MPC plan")
+            blend = Blend(weight_mpc=1.0, accel=np.array(mpc.accel, dtype=float, copy=True))
+        elif msf is None:
+            raise ValueError(f"mode {self.mode} needs an MSF plan")
+        elif self.mode == "msf":
+            blend = Blend(weight_mpc=0.0, accel=np.array(msf.accel, dtype=float, copy=True))
+        else:
+            blend = self.weight.blend(mpc, msf, threat, estimate)
+        reference = self.fbl.reference(blend.accel[0], estimate)
+        delta_mpc = self.fbl.reference(mpc.accel[0], estimate).delta if mpc is not None else float("nan")
+        self.guess = self.weight.next_initial_guess(blend)
+        self.applied = blend.accel[0]
+        self.reference = reference
+        return PlanningRecord(t, threat, mpc, msf, blend, reference, delta_mpc)
+
+    def reference_between(self, estimate: StateEstimate) -> Optional[Reference]:
+        """The reference between planning instants: δ* of the held acceleration at ``estimate`` (when
+        ``steering_fbl_at_motion_rate``), v_x* of the last instant; None before the first plan."""
+        if self.applied is None or self.reference is None:
+            return None
+        if not self.fbl_at_motion_rate:
+            return self.reference
+        return Reference(delta=self.fbl.reference(self.applied, estimate).delta, vx=self.reference.vx)
