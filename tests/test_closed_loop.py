@@ -6,11 +6,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from moose.config import Config, load_config
-from moose.maneuver import MaxSteeringTable
+from moose.config import load_config
 from moose.metrics import summarize
 from moose.scenario import load_scenario
 from moose.simulation import simulate
+from moose.schema import Config
 
 NINE = [
     "paper_v5_tau5", "paper_v5_tau4", "paper_v5_tau3",
@@ -24,22 +24,17 @@ def config() -> Config:
     return load_config()
 
 
-@pytest.fixture(scope="module")
-def table(config: Config) -> MaxSteeringTable:
-    return MaxSteeringTable.build(config.vehicle, config.maneuver)
-
-
-def run(config: Config, table: MaxSteeringTable, name: str, planner: str, seed: int = 0, duration: float = 8.0) -> dict:
+def run(config: Config, name: str, planner: str, seed: int = 0, duration: float = 8.0) -> dict:
     scenario = dataclasses.replace(load_scenario(name), duration=duration)
-    return summarize(simulate(config, scenario, planner=planner, seed=seed, table=table))
+    return summarize(simulate(config, scenario, planner=planner, seed=seed))
 
 
 @pytest.mark.parametrize("seed", [0, 1])
 @pytest.mark.parametrize("name", NINE)
 def test_paper_case_is_collision_free_and_inside_the_field(
-    config: Config, table: MaxSteeringTable, name: str, seed: int
+    config: Config, name: str, seed: int
 ) -> None:
-    s = run(config, table, name, "combined", seed, duration=10.0)  # time to return after the tau = 5 s case
+    s = run(config, name, "combined", seed, duration=10.0)  # time to return after the tau = 5 s case
     assert not s["collided"], s
     assert not s["left_field"], s
     assert s["min_clearance_m"] > 0.0
@@ -55,13 +50,13 @@ def overreacted(mpc: dict, combined: dict, delta_max: float, ratio: float) -> bo
         mpc["max_lateral_offset_m"] > ratio * combined["max_lateral_offset_m"])
 
 
-def test_extreme_case_combined_succeeds_with_every_mpc_solve_capped(config: Config, table: MaxSteeringTable) -> None:
+def test_extreme_case_combined_succeeds_with_every_mpc_solve_capped(config: Config) -> None:
     """Paper, Sec. V-C: in the extreme case the MPC finds no solution within the computational limits and
     the MSF planner avoids the collision.  Every solve of the evasion (τ ≥ 0.5 s: the first second after
     detection, while the lateral motion is decided) stops at the cap; beside the obstacle the problem
     becomes easy and some solves converge."""
     scenario = dataclasses.replace(load_scenario("paper_v7_tau1.4"), duration=8.0)
-    result = simulate(config, scenario, planner="combined", seed=0, table=table)
+    result = simulate(config, scenario, planner="combined", seed=0)
     combined = summarize(result)
     assert not combined["collided"] and not combined["left_field"], combined
     under_threat = [r for r in result.planning if r.threat is not None and r.mpc is not None]
@@ -71,24 +66,24 @@ def test_extreme_case_combined_succeeds_with_every_mpc_solve_capped(config: Conf
     assert max(r.blend.weight_mpc for r in under_threat) < 0.05  # the weight function hands over to the MSF
 
 
-def test_extreme_case_mpc_alone_fails_or_overreacts(config: Config, table: MaxSteeringTable) -> None:
+def test_extreme_case_mpc_alone_fails_or_overreacts(config: Config) -> None:
     """Paper, Sec. V-C: where the combined planner passes, the MPC alone at the paper's caps does not find
     a good manoeuvre: here it saturates the steering and swings out more than 1.3 times as far."""
-    combined = run(config, table, "paper_v7_tau1.4", "combined")
-    mpc = run(config, table, "paper_v7_tau1.4", "mpc")
+    combined = run(config, "paper_v7_tau1.4", "combined")
+    mpc = run(config, "paper_v7_tau1.4", "mpc")
     mpc_failed = mpc["collided"] or mpc["left_field"]
     assert mpc_failed or overreacted(mpc, combined, config.vehicle.delta_max, 1.3), (mpc, combined)
 
 
 @pytest.mark.parametrize("name", ["compare_nu0.26", "compare_nu0.34"])
 def test_comparison_case_mpc_alone_steers_at_the_limit_and_stays_out(
-    config: Config, table: MaxSteeringTable, name: str
+    config: Config, name: str
 ) -> None:
     """Paper, Sec. V-D: the MPC alone gives extreme steering commands; the combined planner avoids the
     obstacle inside the field limits and returns to its lane, the MPC alone stays out (the paper's
     barrier keeps rewarding distance)."""
-    combined = run(config, table, name, "combined")
-    mpc = run(config, table, name, "mpc")
+    combined = run(config, name, "combined")
+    mpc = run(config, name, "mpc")
     assert not combined["collided"] and not combined["left_field"], combined
     assert not mpc["collided"], mpc
     assert mpc["max_abs_steer_rad"] >= 0.95 * config.vehicle.delta_max, mpc
@@ -102,19 +97,19 @@ def test_comparison_case_mpc_alone_steers_at_the_limit_and_stays_out(
     "comparison cases (4.9 vs 4.8 m, 6.1 vs 7.0 m)"))
 @pytest.mark.parametrize("name", ["compare_nu0.26", "compare_nu0.34"])
 def test_comparison_case_mpc_alone_overreacts_where_combined_is_smoother(
-    config: Config, table: MaxSteeringTable, name: str
+    config: Config, name: str
 ) -> None:
     """Paper, Sec. V-D: the MPC alone overreacts; it swings out further than the combined planner."""
-    combined = run(config, table, name, "combined")
-    mpc = run(config, table, name, "mpc")
+    combined = run(config, name, "combined")
+    mpc = run(config, name, "mpc")
     assert overreacted(mpc, combined, config.vehicle.delta_max, 1.05), (mpc, combined)
 
 
-def test_same_seed_same_run_other_seed_other_noise(config: Config, table: MaxSteeringTable) -> None:
+def test_same_seed_same_run_other_seed_other_noise(config: Config) -> None:
     scenario = load_scenario("paper_v6_w2.4")
-    a = simulate(config, scenario, "combined", seed=3, table=table).trace
-    b = simulate(config, scenario, "combined", seed=3, table=table).trace
-    c = simulate(config, scenario, "combined", seed=4, table=table).trace
+    a = simulate(config, scenario, "combined", seed=3).trace
+    b = simulate(config, scenario, "combined", seed=3).trace
+    c = simulate(config, scenario, "combined", seed=4).trace
     for key in ("x", "y", "delta", "vx_hat"):
         np.testing.assert_array_equal(a[key], b[key])
     assert not np.array_equal(a["vx_hat"], c["vx_hat"])

@@ -11,6 +11,7 @@ A node that dies is reported, and the rest of the graph keeps running.
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import signal
 import subprocess
@@ -21,10 +22,13 @@ from typing import Any, Optional
 
 import numpy as np
 
+from moose.config import load_config
 from moose.metrics import summarize
 from moose.scenario import Scenario
 from moose.signals import Blend, Reference
-from moose.simulation import PlanningRecord, SimulationResult
+from moose.planning import PlanningRecord
+from moose.schema import Config
+from moose.simulation import SimulationResult
 
 from . import convert as cv
 from .bag import Recorder
@@ -48,6 +52,7 @@ class Monitor:
     """Collects what the graph publishes into a :class:`SimulationResult`."""
 
     scenario: Scenario
+    config: Config
     odom: list = dataclasses.field(default_factory=list)
     delta: float = 0.0
     plans: list = dataclasses.field(default_factory=list)
@@ -66,8 +71,9 @@ class Monitor:
         node.subscription("diagnostic_msgs/msg/DiagnosticArray", "/diagnostics", self.on_diagnostics, QOS_DEFAULT)
 
     def on_odom(self, m: Any) -> None:
-        p, v = m.pose.pose.position, m.twist.twist.linear
-        self.odom.append((cv.time_of(m), p.x, p.y, v.x, self.delta))
+        p, q, v = m.pose.pose.position, m.pose.pose.orientation, m.twist.twist.linear
+        yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+        self.odom.append((cv.time_of(m), p.x, p.y, yaw, v.x, v.y, self.delta))
 
     def on_mpc(self, m: Any) -> None:
         self.plans.append((cv.time_of(m), cv.plan_from_msg(m), self.current_threat))
@@ -85,13 +91,14 @@ class Monitor:
                 self.finished = True
 
     def result(self, planner: str, seed: int) -> SimulationResult:
-        rows = np.array(sorted(self.odom)) if self.odom else np.zeros((1, 5))
-        trace = {"t": rows[:, 0], "x": rows[:, 1], "y": rows[:, 2], "vx": rows[:, 3], "delta": rows[:, 4]}
+        rows = np.array(sorted(self.odom)) if self.odom else np.zeros((0, 7))  # no odometry: judged incomplete
+        trace = {name: rows[:, i] for i, name in enumerate(("t", "x", "y", "theta", "vx", "vy", "delta"))}
         planning = [
             PlanningRecord(t, threat, plan, None, Blend(self.weights.get(t, float("nan")), plan.accel), Reference(0.0, 0.0), float("nan"))
             for t, plan, threat in self.plans
         ]
-        return SimulationResult(self.scenario, planner, seed, trace, planning, self.first_threat)  # type: ignore[arg-type]
+        return SimulationResult(self.scenario, planner, seed, trace, planning, self.first_threat,  # type: ignore[arg-type]
+                                self.config, self.scenario.lead_time + self.scenario.duration)
 
 
 def launch(
@@ -137,7 +144,7 @@ def launch(
         procs[name] = proc
         threading.Thread(target=stream, args=(name, proc), daemon=True).start()
 
-    monitor = Monitor(scenario)
+    monitor = Monitor(scenario, scenario.configure(load_config(params_file)))
     node = DdsNode("moose_monitor", overrides={"use_sim_time": False})
     monitor.attach(node)
     recorder = Recorder(node, bag) if bag is not None else None
