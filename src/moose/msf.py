@@ -1,39 +1,47 @@
 """Maximum-Steering Feed-forward (MSF) planner (Sec. IV-A): the human-like evasive reference.
 
-On detection a driver steers to the side as fast as possible.  The MSF
-planner follows the maximum steering maneuver y_max of eq. (ymax), scaled so
-that the lateral offset reaches the danger-zone width w plus a margin m a
-little before the car reaches the obstacle, and then holds that offset:
+On detection a driver steers to the side as fast as possible, then counter-steers so that the car
+arrives beside the obstacle moving straight again.  The MSF planner builds that as a lateral
+reference from the maximum steering maneuver y_max of eq. (ymax) (at the speed v at detection):
 
-    ỹ_ref(t) = min(κ y_max(t − t_0, v_x), w + m),   κ = min(1, (w + m) / y_max(f τ, v_x)),
+* **Evasion** (an S-curve to the target offset W = w + m, m a margin beyond the far edge):
 
-where ỹ = side·(y − y_path) is the lateral offset toward the evasion side, t_0
-the first planning instant after detection and τ, v_x those of that instant
-(κ, t_0 and v_x are latched per obstacle; past the peak of y_max, half a turn,
-after 4.8 s at the earliest with μ = 0.3, the reference holds the peak).
-Because y_max(f τ) ≤ y_max(τ), κ ≥ ν (eq. (nudef)): the reference is never
-below the maneuver scaled by the lateral steering index, ν·y_max, which
-reaches w exactly at the near edge; for ν ≳ f² (the early part of y_max is
-about quadratic) κ = 1, the full maneuver.
+      ỹ_ref(s) = κ y_max(s)                       for s ≤ s₁  (steer),
+      ỹ_ref(s) = W_end − κ y_max(2 s₁ − s)        for s₁ < s < 2 s₁  (counter-steer),
+      ỹ_ref(s) = W_end                            afterwards,
 
-Each planning instant re-plans from the current estimate: the reference is
-tracked over the horizon by a critically damped lateral law
+  with ỹ = side·(y − y_path) the offset toward the evasion side and s the time since detection.
+  The counter-steer phase is the steer phase mirrored in time and offset, so position and lateral
+  velocity are continuous, and the car arrives at W_end = 2 κ y_max(s₁) with no lateral velocity.
+  When the scaled maneuver can arrive at W by f τ (the reach fraction f of the time to
+  collision), κ = W / (2 y_max(f τ / 2)) ≤ 1 and s₁ = f τ / 2: the maneuver is scaled down to what
+  the threat needs (κ ≥ ν for the early, near-quadratic part of y_max).  Otherwise κ = 1 (the full
+  maneuver) and the counter-steer starts at the earliest s₁ with ỹ_ref(τ) ≥ W (the reference is
+  beside the zone's far edge, with the margin, when the car reaches the near edge), which makes
+  W_end larger than W: a car that has to steer hard cannot stop its lateral motion any sooner.
+  If even the full maneuver reaches less than W by τ (ν close to 1 and beyond), s₁ = τ: steer
+  fully until the near edge.
+* **Return** (once the detector has cleared the threat, the CoG past the obstacle): a cosine
+  S-curve from the offset ỹ_c at that instant back to the lane, y_c (1 + cos(π s / T)) / 2, its
+  duration T = π √(|ỹ_c| / (2 a_ret)) set so that its lateral acceleration peaks at
+  a_ret = ``return_share`` · μ g (a calm lane change, far from the tyres' limit).
+* Without a threat and no return under way: lane keeping on y_lane.
 
-    a_Y = ÿ_ref + 2ω (ẏ_ref − ṽ_Y) + ω² (ỹ_ref − ỹ),
-
-rolled out on the kinematic model eq. (skin) with exact zero-order hold, so
-the output is a whole input sequence (blendable, and usable as the MPC's
-initial guess).  The feed-forward ÿ_ref is the maneuver's mean acceleration
-over each step, (ẏ_ref(s + t_s) − ẏ_ref(s)) / t_s, which a zero-order hold
-reproduces exactly.  Once the detector clears the threat (the CoG is past the
-obstacle) or without a threat, the same law with ω_return and zero reference
-returns the car to the lane y_lane.  Longitudinally the maneuver is "without
-braking": v̇_X = k_v (v_des − v_X).  Both accelerations are clipped to
-±a_x_max, ±a_y_max (the MPC's input bounds).
+Each planning instant re-plans from the current estimate: the reference is tracked over the
+horizon by the critically damped law a_Y = ÿ_ref + 2ω (ẏ_ref − v_Y) + ω² (ỹ_ref − ỹ) (ω =
+``omega_track``; lane keeping ``omega_lane``), rolled out on the kinematic model eq. (skin) with
+exact zero-order hold, so the output is a whole input sequence (blendable, and usable as the MPC's
+initial guess).  The feed-forward ÿ_ref is the reference's mean acceleration over each step
+(what a zero-order hold reproduces exactly).  Longitudinally the maneuver is "without braking":
+the speed |v| of the CoG is regulated, d|v|/dt = k_v (v_des − |v|), so that the lateral
+acceleration adds no speed of its own (regulating the global v_X instead would let the car speed
+up as its heading turns).  Both accelerations are clipped to the planning grid's bounds (the
+rear motors' and the tyres' limits at the planning μ).
 """
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from typing import Optional
 
@@ -59,87 +67,163 @@ def zoh_rollout(state: np.ndarray, accel: np.ndarray, t_s: float) -> np.ndarray:
 
 
 @dataclasses.dataclass(frozen=True)
-class _Evasion:
-    """The latched plan for one obstacle."""
+class Evasion:
+    """The S-curve latched at detection for one obstacle."""
 
     obstacle: Obstacle
     t0: float
-    kappa: float
+    """Time of detection (s)."""
     vx: float
-    """Speed the maneuver profile is evaluated at (m/s): the speed at detection."""
-    s_peak: float
-    """Time at which y_max(·, vx) peaks within the table (s): past half a turn it falls, the reference holds."""
+    """Speed the maneuver y_max is evaluated at (m/s): the speed at detection."""
+    kappa: float
+    """Scale of the maximum steering maneuver, in (0, 1]."""
+    s1: float
+    """Time after detection at which the counter-steer starts (s)."""
+    target: float
+    """Offset W_end the S-curve arrives at, at 2 s₁ (m)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class LaneReturn:
+    """The cosine S-curve latched when the threat cleared."""
+
+    t0: float
+    offset: float
+    """Offset ỹ_c from the lane at the start (m)."""
+    duration: float
+    """T (s)."""
+    side: float
+    y_path: float
 
 
 class MsfPlanner:
-    """Maximum steering feed-forward; remembers the current obstacle's detection time and scale κ."""
+    """Maximum steering feed-forward; remembers the current evasion or return it is flying."""
 
     def __init__(self, params: MsfParams, grid: PlanningGrid, table: MaxSteeringTable) -> None:
         self.params = params
-        self.table = table
         self.grid = grid
-        self._evasion: Optional[_Evasion] = None
+        self.table = table
+        self._evasion: Optional[Evasion] = None
+        self._side = 1.0
+        self._y_path = 0.0
+        self._return: Optional[LaneReturn] = None
 
     def reset(self) -> None:
         self._evasion = None
+        self._return = None
 
-    def scale(self, w: float, tau: float, vx: float) -> float:
-        """κ = min(1, (w + m) / y_max(f τ, v_x)): the share of the maximum steering maneuver needed."""
-        p = self.params
-        reach = self.table.y_max(p.reach_fraction * max(tau, 0.0), max(vx, 0.0))
-        return min(1.0, (w + p.margin) / reach) if reach > 1e-9 else 1.0
+    # -- the evasion S-curve -------------------------------------------------------------------------
+    def evasion(self, obstacle: Obstacle, t0: float, w: float, tau: float, vx: float) -> Evasion:
+        """The S-curve for a threat of width ``w`` at time to collision ``tau``, at the speed ``vx``."""
+        p, y = self.params, self.table.y_max
+        target = w + p.margin
+        v = max(vx, 0.0)
+        tau = max(tau, 0.0)
+        arrive = p.reach_fraction * tau
+        half = y(0.5 * arrive, v)
+        if 2.0 * half >= target and half > 1e-9:
+            return Evasion(obstacle, t0, v, target / (2.0 * half), 0.5 * arrive, target)
 
-    def _reference(self, s: float, evasion: _Evasion, target: float) -> tuple[float, float, float]:
-        """(ỹ_ref, ẏ_ref, mean ÿ_ref over the coming step) at ``s`` seconds after t_0."""
-        table, k, v = self.table, evasion.kappa, evasion.vx
-        if s >= evasion.s_peak:
-            return min(k * table.y_max(evasion.s_peak, v), target), 0.0, 0.0
-        y_ref = k * table.y_max(s, v)
-        if y_ref >= target:
-            return target, 0.0, 0.0
-        v_ref = k * table.v_Y_max(s, v)
-        a_ref = (k * table.v_Y_max(s + self.grid.t_s, v) - v_ref) / self.grid.t_s
-        return y_ref, v_ref, a_ref
+        def at_tau(s1: float) -> float:  # ỹ_ref(τ) for κ = 1 and the counter-steer from s1
+            return y(tau, v) if s1 >= tau else 2.0 * y(s1, v) - y(2.0 * s1 - tau, v)
 
+        # past half a turn y_max falls again: the counter-steer starts by its peak at the latest
+        profile = np.asarray(y(self.table.t, v))
+        lo, hi = 0.5 * tau, min(tau, float(self.table.t[int(np.argmax(profile))]))
+        lo = min(lo, hi)
+        if at_tau(hi) <= target:
+            s1 = hi
+        else:
+            for _ in range(40):  # ỹ_ref(τ) grows with s1 while y_max is convex (its early part)
+                mid = 0.5 * (lo + hi)
+                lo, hi = (mid, hi) if at_tau(mid) < target else (lo, mid)
+            s1 = hi
+        return Evasion(obstacle, t0, v, 1.0, s1, 2.0 * y(s1, v))
+
+    def evasion_reference(self, s: float, e: Evasion) -> tuple[float, float, float]:
+        """(ỹ_ref, ẏ_ref, mean ÿ_ref over the coming step) ``s`` seconds after detection."""
+        ts = self.grid.t_s
+
+        def position(u: float) -> tuple[float, float]:
+            if u <= 0.0:
+                return 0.0, 0.0
+            if u <= e.s1:
+                return e.kappa * self.table.y_max(u, e.vx), e.kappa * self.table.v_Y_max(u, e.vx)
+            if u < 2.0 * e.s1:
+                mirror = 2.0 * e.s1 - u
+                return (e.target - e.kappa * self.table.y_max(mirror, e.vx),
+                        e.kappa * self.table.v_Y_max(mirror, e.vx))
+            return e.target, 0.0
+
+        y_ref, v_ref = position(s)
+        return y_ref, v_ref, (position(s + ts)[1] - v_ref) / ts
+
+    def return_reference(self, s: float, r: LaneReturn) -> tuple[float, float, float]:
+        """(ỹ_ref, ẏ_ref, mean ÿ_ref over the coming step) ``s`` seconds into the return."""
+        ts = self.grid.t_s
+
+        def position(u: float) -> tuple[float, float]:
+            if u >= r.duration:
+                return 0.0, 0.0
+            phase = math.pi * max(u, 0.0) / r.duration
+            return 0.5 * r.offset * (1.0 + math.cos(phase)), -0.5 * r.offset * math.pi / r.duration * math.sin(phase)
+
+        y_ref, v_ref = position(s)
+        return y_ref, v_ref, (position(s + ts)[1] - v_ref) / ts
+
+    # -- planning ------------------------------------------------------------------------------------
     def plan(self, inp: PlannerInput) -> PlanResult:
-        """Accelerations over the horizon: evasion when ``inp.threat`` is set ("ok"), else lane keeping ("idle")."""
+        """Accelerations over the horizon: evasion with a threat ("ok"), the return or lane keeping without ("idle")."""
         start = time.perf_counter()
-        p, est, threat = self.params, inp.estimate, inp.threat
+        p, g, est, threat = self.params, self.grid, inp.estimate, inp.threat
         if threat is not None:
             if self._evasion is None or self._evasion.obstacle != threat.obstacle:
-                vx = max(est.vx, 0.0)
-                profile = np.asarray(self.table.y_max(self.table.t, vx))
-                s_peak = float(self.table.t[int(np.argmax(profile))])
-                self._evasion = _Evasion(threat.obstacle, inp.t, self.scale(threat.w, threat.tau, vx), vx, s_peak)
-            evasion: Optional[_Evasion] = self._evasion
-            side, y_path, target = float(threat.side), threat.y_path, threat.w + p.margin
-        else:
-            self._evasion = evasion = None
-            side, y_path, target = 1.0, inp.y_lane, 0.0
+                self._evasion = self.evasion(threat.obstacle, inp.t, threat.w, threat.tau, est.vx)
+            self._return = None
+            self._side, self._y_path = float(threat.side), threat.y_path
+        elif self._evasion is not None:  # the threat has cleared: fly back to the lane
+            offset = self._side * (est.y - inp.y_lane)
+            a_ret = p.return_share * g.a_y_max
+            duration = math.pi * math.sqrt(abs(offset) / (2.0 * a_ret)) if offset else 0.0
+            self._return = LaneReturn(inp.t, offset, duration, self._side, inp.y_lane)
+            self._evasion = None
+        if self._return is not None and inp.t - self._return.t0 >= self._return.duration + g.N_p * g.t_s:
+            self._return = None
+        evasion, lane_return = self._evasion, self._return
         if evasion is not None:
-            k_p, k_v = p.omega_evade**2, 2.0 * p.omega_evade
+            side, y_path, omega = self._side, self._y_path, p.omega_track
+        elif lane_return is not None:
+            side, y_path, omega = lane_return.side, lane_return.y_path, p.omega_track
         else:
-            k_p, k_v = p.omega_return**2, 2.0 * p.omega_return
+            side, y_path, omega = 1.0, inp.y_lane, p.omega_lane
+        k_p, k_v = omega * omega, 2.0 * omega
         state = np.array([est.x, est.y, est.vX, est.vY], dtype=float)
-        g = self.grid
         accel = np.zeros((g.N_p, 2))
         ts = g.t_s
         y, vX, vY = float(est.y), float(state[2]), float(state[3])
         for k in range(g.N_p):
-            offset, v_lat = side * (y - y_path), side * vY
+            s = inp.t + k * ts
             if evasion is not None:
-                y_ref, v_ref, a_ref = self._reference(inp.t + k * ts - evasion.t0, evasion, target)
+                y_ref, v_ref, a_ref = self.evasion_reference(s - evasion.t0, evasion)
+            elif lane_return is not None:
+                y_ref, v_ref, a_ref = self.return_reference(s - lane_return.t0, lane_return)
             else:
                 y_ref = v_ref = a_ref = 0.0
+            offset, v_lat = side * (y - y_path), side * vY
             a_lat = side * (a_ref + k_v * (v_ref - v_lat) + k_p * (y_ref - offset))
-            a_lon = p.k_speed * (inp.v_des - vX)
-            a_lon = min(max(a_lon, -g.a_x_max), g.a_x_max)
             a_lat = min(max(a_lat, -g.a_y_max), g.a_y_max)
+            speed = math.hypot(vX, vY)
+            if vX > 1.0:  # d|v|/dt = k_v (v_des − |v|): v_X a_X + v_Y a_Y = |v| k_v (v_des − |v|)
+                a_lon = (p.k_speed * (inp.v_des - speed) * speed - vY * a_lat) / vX
+            else:  # crawling or turned across: plain speed control
+                a_lon = p.k_speed * (inp.v_des - speed)
+            a_lon = min(max(a_lon, -g.a_x_max), g.a_x_max)
             accel[k, 0], accel[k, 1] = a_lon, a_lat
-            # eq. (skin), exact zero-order hold (lateral part; x does not enter the law)
+            # eq. (skin), exact zero-order hold (x does not enter the law)
             y += ts * vY + 0.5 * ts * ts * a_lat
             vX += ts * a_lon
             vY += ts * a_lat
         predicted = zoh_rollout(state, accel, ts)
-        return PlanResult(accel=accel, status="ok" if evasion is not None else "idle", iterations=0,
-                          solve_time_s=time.perf_counter() - start, cost=0.0, predicted=predicted)
+        status = "ok" if evasion is not None else "idle"
+        return PlanResult(accel=accel, status=status, iterations=0, solve_time_s=time.perf_counter() - start,
+                          cost=0.0, predicted=predicted)

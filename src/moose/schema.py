@@ -181,21 +181,24 @@ class MsfParams:
     """MSF planner parameters."""
 
     margin: float = 0.5
-    """Lateral margin m beyond the far edge (m)."""
-    omega_evade: float = 2.5
-    """Natural frequency of the lateral tracking law while evading (rad/s)."""
-    omega_return: float = 1.0
-    """Natural frequency of the lane return (rad/s)."""
+    """Lateral margin m beyond the far edge (m): the S-curve's target is w + m."""
+    reach_fraction: float = 1.0
+    """f: a scaled S-curve arrives at w + m, moving straight again, after this fraction of τ."""
+    omega_track: float = 0.7
+    """Natural frequency of the law tracking the evasion and return S-curves (rad/s)."""
+    omega_lane: float = 1.0
+    """Natural frequency of lane keeping (rad/s)."""
+    return_share: float = 0.3
+    """Peak lateral acceleration of the return S-curve as a share of μ g."""
     k_speed: float = 0.5
     """Speed-tracking gain k_v (1/s)."""
-    reach_fraction: float = 0.6
-    """f: the scaled maneuver reaches w + margin after this fraction of τ (early, like a driver)."""
 
     def __post_init__(self) -> None:
-        for name in ("omega_evade", "omega_return", "k_speed"):
+        for name in ("omega_track", "omega_lane", "k_speed"):
             check(name, getattr(self, name), positive, "a positive number")
         check("margin", self.margin, non_negative, "a non-negative distance (m)")
         check("reach_fraction", self.reach_fraction, lambda v: 0.0 < v <= 1.0, "a fraction in (0, 1]")
+        check("return_share", self.return_share, lambda v: 0.0 < v <= 1.0, "a share in (0, 1]")
 
 
 @dataclasses.dataclass(frozen=True)
