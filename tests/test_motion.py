@@ -133,3 +133,14 @@ def test_invalid_parameters_and_steps_are_refused() -> None:
     estimate = StateEstimate(0.0, 0.0, 0.0, 0.0, 5.0, 0.0, 0.0, 0.0)
     with pytest.raises(ValueError, match="dt = 0.1"):
         ctrl.step(Reference(0.0, 5.0), estimate, 0.0, 0.1)  # K_delta dt = 2: the discrete EPS loop rings
+
+
+def test_torque_slews_at_the_motors_rate_limit() -> None:
+    # a 2 m/s step asks for full torque at once; the motors (and the CAN guard) allow 2000 N m/s
+    log = run(Reference(delta=0.0, vx=7.0), 1.0)
+    torque = log[1:, 3]
+    assert np.max(np.abs(np.diff(np.concatenate([[0.0], torque])))) <= P.torque_rate_max * DT + 1e-9
+    assert np.max(torque) == pytest.approx(P.T_max)  # it gets there: 0.1 s at the rate limit
+    slow = VehicleParams(torque_rate_max=500.0)
+    log = run(Reference(delta=0.0, vx=7.0), 0.3, vehicle=slow)
+    assert log[-1, 3] == pytest.approx(500.0 * 0.3, abs=1e-6)  # still ramping: 150 N m after 0.3 s

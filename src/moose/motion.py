@@ -38,8 +38,10 @@ request no yaw moment, and an equal split adds none of its own (with equal
 wheel loads it also maximises the traction available before either wheel
 saturates).
 
-Anti-windup: conditional integration — the integrator holds while the torque
-is saturated in the direction of the error.
+The torque is limited as the motors are, |T| ≤ T_max and |Ṫ| ≤ Ṫ_max (the vehicle's
+``torque_rate_max``, which the CAN bridge's guard enforces as well, so the lockstep loop
+drives the car the bridge would).  Anti-windup: conditional integration — the integrator
+holds while the torque is limited in the direction of the error.
 
 Feedback EPS (C_δ,fb).  The FPEV2-Kanon's steering motor is speed-controlled
 (Sec. V), so the command is a rate: δ̇_cmd = K_δ (δ* − δ_meas), δ* clipped
@@ -75,6 +77,7 @@ class MotionController:
     def reset(self) -> None:
         """Forget the integrator and the reference ramp."""
         self._integral = 0.0
+        self._torque = 0.0
         self._target: float | None = None
         self._ramp_v = 0.0
         self._slope = 0.0
@@ -105,11 +108,15 @@ class MotionController:
         error = (v_ref - estimate.vx) / p.r
         feed_forward = self.J_n * slope / p.r
         torque = feed_forward + self.k_p * error + self.k_i * self._integral
-        saturated = abs(torque) >= p.T_max and torque * error > 0.0
+        # the motors' limits: |T| ≤ T_max and |dT/dt| ≤ torque_rate_max (what the CAN bridge enforces too)
+        step = p.torque_rate_max * dt
+        low, high = max(-p.T_max, self._torque - step), min(p.T_max, self._torque + step)
+        saturated = (torque >= high and error > 0.0) or (torque <= low and error < 0.0)
         if not saturated:
             self._integral += error * dt
-        torque = min(max(torque, -p.T_max), p.T_max)
-        # TDL: equal split, each motor clipped at T_max
+        torque = min(max(torque, low), high)
+        self._torque = torque
+        # TDL: equal split
         delta_ref = min(max(reference.delta, -p.delta_max), p.delta_max)
         rate = min(max(self.params.k_delta * (delta_ref - delta_measured), -p.delta_rate_max), p.delta_rate_max)
         return np.array([rate, torque, torque])
