@@ -11,13 +11,18 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.patches import Rectangle  # noqa: E402
 
 from .simulation import SimulationResult  # noqa: E402
+from .verdict import judge  # noqa: E402
+
+OUTCOME_COLOUR = {"clear": "tab:green", "incomplete": "tab:gray", "stopped_short": "tab:orange"}
+"""Colour of an outcome's label in the figure (failures red)."""
 
 
 def plot_result(results: Sequence[SimulationResult], path: str | Path) -> Path:
     """Three panels: y–x path with the danger zone; δ_MPC and δ vs x; v_x,ref and v_x vs x.
 
     Several results (e.g. ``combined`` and ``mpc`` on one scenario, as Fig. 8)
-    are overlaid; the obstacle of the first is drawn.
+    are overlaid; the obstacle of the first is drawn.  Each run's verdict (:func:`moose.verdict.judge`,
+    from its true state) is written on the path panel, green when clear, red for a failure.
     """
     path = Path(path)
     fig, axes = plt.subplots(3, 1, figsize=(7.0, 8.0), sharex=True)
@@ -30,10 +35,14 @@ def plot_result(results: Sequence[SimulationResult], path: str | Path) -> Path:
     for ax in axes:
         ax.axvline(0.5 * (box.x_min + box.x_max), color="k", linestyle="--", linewidth=0.8)
         ax.grid(True, alpha=0.3)
+    verdicts = []
     for result in results:
         tr = result.trace
         label = result.planner
-        ax_path.plot(tr["x"], tr["y"], label=label, linewidth=1.8)
+        verdict = judge(tr["t"], tr["x"], tr["y"], tr["theta"], tr["vx"], tr["vy"], scenario.danger_zone,
+                        result.scenario.field, result.end_time, result.config.verdict)
+        verdicts.append((label, verdict))
+        ax_path.plot(tr["x"], tr["y"], label=f"{label}: {verdict.outcome.upper()}", linewidth=1.8)
         ax_steer.plot(tr["x"], tr["delta"], label=f"δ ({label})", linewidth=1.6)
         ax_steer.plot(tr["x"], tr["delta_mpc"], label=f"δ_MPC ({label})", linewidth=1.0, linestyle=":")
         ax_speed.plot(tr["x"], tr["vx_ref"], label=f"v_x,ref ({label})", linewidth=1.0, linestyle=":")
@@ -43,6 +52,10 @@ def plot_result(results: Sequence[SimulationResult], path: str | Path) -> Path:
     if first is not None:
         title += f"   τ = {first.tau:.2f} s, ν = {first.nu:.2f}"
     ax_path.set_title(title)
+    for i, (label, verdict) in enumerate(verdicts):  # the verdict of each run, in its colour, on the path panel
+        ax_path.text(0.01, 0.95 - 0.1 * i, f"{label}: {verdict.outcome.upper()} — {verdict.reason}",
+                     transform=ax_path.transAxes, fontsize=7, va="top",
+                     color=OUTCOME_COLOUR.get(verdict.outcome, "tab:red"))
     ax_path.set_ylabel("y_ego (m)")
     ax_path.set_ylim(min(scenario.field.y_min, -5.0), max(scenario.field.y_max, 10.0))
     ax_steer.set_ylabel("δ (rad)")
