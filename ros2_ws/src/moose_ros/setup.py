@@ -39,5 +39,10 @@ setup(
     description="Node graph of the moose-test collision avoidance",
     license="Apache-2.0",
     tests_require=["pytest"],
-    entry_points={"console_scripts": [f"{node} = {PACKAGE}.nodes:{node}_main" for node in NODES]},
+    entry_points={
+        "console_scripts": [f"{node} = {PACKAGE}.nodes:{node}_main" for node in NODES],
+        # plugins of the `moose` command (moose.cli.plugins)
+        "moose.commands": [f"{command} = {PACKAGE}.cli.{command}:add_subparser" for command in ("node", "launch", "bag")],
+        "moose.recorders": [f"bag = {PACKAGE}.bag:record_simulation"],
+    },
 )

@@ -359,6 +359,17 @@ def record_result(result: Any, path: str | Path) -> dict[str, int]:
     return dict(writer.counts)
 
 
+def record_simulation(result: Any, path: str | Path) -> dict[str, int]:
+    """``moose simulate``'s bag recorder (entry point group ``moose.recorders``): :func:`record_result`, with
+    a bag that cannot be written reported as a :class:`~moose.params.ParamError`."""
+    from moose.params import ParamError
+
+    try:
+        return record_result(result, path)
+    except BagError as exc:
+        raise ParamError(str(exc)) from None
+
+
 def replan(path: str | Path, config: Any, planner: str = "combined", v_des: Optional[float] = None) -> dict[str, Any]:
     """Run the planners open-loop on a bag's recorded state/threat stream at its planning instants.
 
