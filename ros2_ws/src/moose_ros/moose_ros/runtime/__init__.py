@@ -7,7 +7,7 @@ API (both backends, see :class:`NodeBase`):
 - ``subscription(type, topic, callback, qos)``, ``timer(period, callback)`` → handles with ``cancel()``
 - ``declare_parameter(name, default)``, ``get_parameter(name)``, ``param(name, default)``, ``parameters``
 - ``now()`` (s; simulated time when ``use_sim_time``), ``log_info/log_warn/log_error``
-- ``count_publishers(topic)``, ``count_subscribers(topic)`` (graph introspection)
+- ``count_publishers(topic)``, ``count_subscribers(topic)`` (graph introspection), ``endpoints()`` (its own)
 - ``spin(until)``, ``spin_once(timeout)``, ``shutdown()``, ``make(type, **fields)``
 
 Message types are named ``pkg/msg/Type``; message objects have the ``.msg`` field names on both
@@ -26,7 +26,7 @@ from typing import Any, Optional
 
 from moose.params import ParamError
 
-from .base import Handle, NodeBase, Publisher
+from .base import Endpoint, Handle, NodeBase, Publisher
 from .dds import DdsNode
 from .names import CLOCK_TOPIC, CLOCK_TYPE, dds_topic_name, normalise_namespace, resolve_topic
 from .qos import QOS_CLOCK, QOS_CLOCK_READER, QOS_DEFAULT, QOS_LATCHED, QOS_LATCHED_READER, QOS_SENSOR, Qos
@@ -34,7 +34,7 @@ from .rclpy_node import RclpyNode
 
 __all__ = [
     "CLOCK_TOPIC", "CLOCK_TYPE", "QOS_CLOCK", "QOS_CLOCK_READER", "QOS_DEFAULT", "QOS_LATCHED", "QOS_LATCHED_READER",
-    "QOS_SENSOR", "DdsNode", "Handle", "NodeBase", "Publisher", "Qos", "RclpyNode", "backend", "create_node",
+    "QOS_SENSOR", "DdsNode", "Endpoint", "Handle", "NodeBase", "Publisher", "Qos", "RclpyNode", "backend", "create_node",
     "dds_topic_name", "normalise_namespace", "resolve_topic",
 ]
 

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import sys
 import threading
@@ -11,6 +12,7 @@ from typing import Any, Callable, Optional
 from moose.params import ParamError, check, read_ros_params
 
 from .names import check_node_name, normalise_namespace, resolve_topic
+from .qos import Qos
 
 
 def flatten_params(params: dict[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -63,6 +65,18 @@ def typed_value(name: str, value: Any, default: Any) -> Any:
     return value
 
 
+@dataclasses.dataclass(frozen=True)
+class Endpoint:
+    """A publisher or subscription a node created."""
+
+    kind: str
+    """``publisher`` or ``subscription``."""
+    topic: str
+    """Fully qualified topic name."""
+    type: str
+    qos: Qos
+
+
 class Handle:
     """A subscription or timer; ``cancel()`` stops it."""
 
@@ -104,6 +118,7 @@ class NodeBase:
         for key, value in overrides.items():
             set_dotted(self._params, key, value)
         self.use_sim_time = self._sim_time_flag(self._params.get("use_sim_time", False))
+        self._endpoints: list[Endpoint] = []
         self._stop = threading.Event()
         self._closed = False
         self._spinning = False
@@ -183,6 +198,14 @@ class NodeBase:
     @property
     def parameters(self) -> dict[str, Any]:
         return self._params
+
+    # -- introspection ---------------------------------------------------------------
+    def endpoints(self) -> list[Endpoint]:
+        """The publishers and subscriptions this node created (the runtime's ``/clock`` reader included)."""
+        return list(self._endpoints)
+
+    def _track(self, kind: str, topic: str, type_name: str, qos: Qos) -> None:
+        self._endpoints.append(Endpoint(kind, topic, type_name, qos))
 
     # -- logging ---------------------------------------------------------------------
     def _log(self, level: str, text: str) -> None:

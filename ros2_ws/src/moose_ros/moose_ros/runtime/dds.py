@@ -145,6 +145,7 @@ class DdsNode(NodeBase):
                     cause = exc.__cause__ or exc
                     raise TypeError(f"cannot publish {type_name} on {full!r}: {exc} ({cause})") from None
 
+        self._track("publisher", full, type_name, qos)
         return Publisher(full, type_name, publish, lambda: len(writer.get_matched_subscriptions()))
 
     def subscription(self, type_name: str, topic: str, callback: Callable[[Any], None],
@@ -152,12 +153,13 @@ class DdsNode(NodeBase):
         from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState
         from cyclonedds.sub import DataReader
 
-        dds_topic, cls, _full = self._topic(type_name, topic, "subscription", qos)
+        dds_topic, cls, full = self._topic(type_name, topic, "subscription", qos)
         reader = DataReader(self.participant, dds_topic, qos=self._qos(qos, writer=False))
         condition = ReadCondition(reader, SampleState.Any | ViewState.Any | InstanceState.Any)
         entry = _Reader(reader, callback, cls, condition, qos.depth)
         self._readers.append(entry)
         self._waitset.attach(condition)
+        self._track("subscription", full, type_name, qos)
 
         def cancel() -> None:
             if entry.active:

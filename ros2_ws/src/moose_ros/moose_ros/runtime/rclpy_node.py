@@ -78,11 +78,14 @@ class RclpyNode(NodeBase):
                 raise TypeError(f"publishing {type(msg).__name__} on {full!r}, which carries {type_name!r}")
             pub.publish(msg)
 
+        self._track("publisher", full, type_name, qos)
         return Publisher(full, type_name, publish, pub.get_subscription_count)
 
     def subscription(self, type_name: str, topic: str, callback: Callable[[Any], None],
                      qos: Qos = QOS_DEFAULT) -> Handle:
-        sub = self.node.create_subscription(self._class(type_name), self.resolve(topic), callback, self._qos(qos))
+        full = self.resolve(topic)
+        sub = self.node.create_subscription(self._class(type_name), full, callback, self._qos(qos))
+        self._track("subscription", full, type_name, qos)
         return Handle(lambda: self.node.destroy_subscription(sub))
 
     def timer(self, period: float, callback: Callable[[], None]) -> Handle:
