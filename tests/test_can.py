@@ -208,7 +208,7 @@ def test_dump_decodes_and_replay_sends_a_recorded_log(tmp_path) -> None:
 def test_bridge_node_reports_a_bus_error_and_recovers(monkeypatch: pytest.MonkeyPatch) -> None:
     import time as _time
 
-    from moose_ros.nodes import CanBridge
+    from moose_ros.nodes.can_bridge import CanBridge
     from moose_ros.runtime import DdsNode
 
     node = DdsNode("can_bridge", overrides={"can_interface": "virtual", "can_channel": "moose-test-buserror"})

@@ -16,8 +16,8 @@ from setuptools import find_packages, setup
 
 PACKAGE = "moose_ros"
 NODES = [
-    "observer", "obstacle_detector", "mpc_planner", "msf_planner",
-    "weight_fbl", "motion_controller", "vehicle_simulator", "can_bridge",
+    "vehicle_simulator", "observer", "obstacle_detector", "mpc_planner", "msf_planner", "weight_fbl",
+    "motion_controller", "can_bridge",
 ]
 
 setup(

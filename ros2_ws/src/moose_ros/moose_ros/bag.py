@@ -20,26 +20,11 @@ from typing import Any, Iterator, Optional, Sequence
 
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 
+from .graph import TOPICS
 from .interfaces import from_rosbags, typestore
 
-TOPIC_TYPES = {
-    "/clock": "rosgraph_msgs/msg/Clock",
-    "/vehicle/odom": "nav_msgs/msg/Odometry",
-    "/vehicle/imu": "sensor_msgs/msg/Imu",
-    "/vehicle/gps": "nav_msgs/msg/Odometry",
-    "/vehicle/wheel_speeds": "moose_msgs/msg/WheelSpeeds",
-    "/vehicle/steering": "moose_msgs/msg/SteeringReport",
-    "/perception/obstacles": "moose_msgs/msg/ObstacleArray",
-    "/perception/state": "moose_msgs/msg/StateEstimate",
-    "/perception/threat": "moose_msgs/msg/Threat",
-    "/planning/mpc": "moose_msgs/msg/PlannerOutput",
-    "/planning/msf": "moose_msgs/msg/PlannerOutput",
-    "/planning/blend": "moose_msgs/msg/Blend",
-    "/control/reference": "moose_msgs/msg/Reference",
-    "/control/actuator_command": "moose_msgs/msg/ActuatorCommand",
-    "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
-}
-"""Every topic of the graph and its type (docs/design.md, "Node graph")."""
+TOPIC_TYPES = {name: topic.type for name, topic in TOPICS.items()}
+"""Every topic of the graph and its type (:mod:`moose_ros.graph`)."""
 
 
 class BagError(RuntimeError):
@@ -102,24 +87,13 @@ class Recorder:
     """Records topics of a running graph through a DDS node of the runtime."""
 
     def __init__(self, node: Any, path: str | Path, topics: Optional[Sequence[str]] = None) -> None:
-        from .runtime import QOS_DEFAULT, QOS_LATCHED, QOS_LATCHED_READER, QOS_SENSOR
-
         chosen = list(topics) if topics else list(TOPIC_TYPES)
         unknown = [t for t in chosen if t not in TOPIC_TYPES]
         if unknown:
             raise BagError(f"--topics {unknown[0]!r} is not a topic of the graph; topics: {', '.join(TOPIC_TYPES)}")
         self.writer = BagWriter(path)
-        sensor = {"/vehicle/odom", "/vehicle/imu", "/vehicle/wheel_speeds", "/vehicle/steering"}
         for topic in chosen:
-            if topic in sensor:
-                qos = QOS_SENSOR
-            elif topic == "/diagnostics":
-                qos = QOS_LATCHED_READER
-            elif topic == "/perception/obstacles":
-                qos = QOS_LATCHED
-            else:
-                qos = QOS_DEFAULT
-            node.subscription(TOPIC_TYPES[topic], topic, self._callback(topic), qos)
+            TOPICS[topic].subscription(node, self._callback(topic))  # the subscribers' QoS of the contract
 
     def _callback(self, topic: str):
         type_name = TOPIC_TYPES[topic]
@@ -277,13 +251,14 @@ def export(path: str | Path, out_dir: str | Path, topics: Optional[Sequence[str]
 def play(path: str | Path, node: Any, rate: float = 1.0, topics: Optional[Sequence[str]] = None, loop: bool = False,
          start: float = 0.0, clock: bool = False, stop: Optional[Any] = None) -> int:
     """Publish a bag's messages with their original timing (scaled by ``rate``); returns the count sent."""
-    from .runtime import QOS_CLOCK, QOS_DEFAULT, QOS_LATCHED
+    from .graph import CLOCK
+    from .runtime import QOS_DEFAULT
 
     messages = list(read_bag(path, topics))
     if not messages:
         raise BagError(f"bag {str(path)!r} has no messages on {list(topics) if topics else 'any topic'}")
     publishers: dict[str, Any] = {}
-    clock_pub = node.publisher("rosgraph_msgs/msg/Clock", "/clock", QOS_CLOCK) if clock else None
+    clock_pub = CLOCK.publisher(node) if clock else None
     t0 = messages[0].timestamp_ns + int(start * 1e9)
     sent = 0
     while True:
@@ -297,11 +272,13 @@ def play(path: str | Path, node: Any, rate: float = 1.0, topics: Optional[Sequen
             if delay > 0:
                 time.sleep(delay)
             if m.topic not in publishers:
-                # latched topics keep their durability (a volatile writer never matches a transient-local reader)
-                latched = m.topic in ("/perception/obstacles", "/diagnostics")
-                publishers[m.topic] = node.publisher(m.type_name, m.topic, QOS_LATCHED if latched else QOS_DEFAULT)
+                # reliable, so the player drops nothing (a reliable writer matches best-effort readers too); latched
+                # topics keep their durability (a volatile writer never matches a transient-local reader)
+                contract = TOPICS.get(m.topic)
+                latched = contract is not None and contract.qos.transient_local
+                publishers[m.topic] = node.publisher(m.type_name, m.topic, contract.qos if latched else QOS_DEFAULT)
             if clock_pub is not None:
-                c = node.make("rosgraph_msgs/msg/Clock")
+                c = node.make(CLOCK.type)
                 c.clock.sec, c.clock.nanosec = divmod(m.timestamp_ns, 1_000_000_000)
                 clock_pub(c)
             publishers[m.topic](from_rosbags(m.msg, m.type_name))
