@@ -33,7 +33,7 @@ def test_moose_ros_registers_its_commands_and_the_recorder() -> None:
     commands = {ep.name: ep.value for ep in entry_points(group="moose.commands")}
     assert commands == {"node": "moose_ros.cli.node:add_subparser", "launch": "moose_ros.cli.launch:add_subparser",
                         "bag": "moose_ros.cli.bag:add_subparser"}
-    assert [ep.value for ep in entry_points(group="moose.recorders")] == ["moose_ros.bag:record_simulation"]
+    assert [ep.value for ep in entry_points(group="moose.recorders")] == ["moose_ros.bag.record:record_simulation"]
     choices = build_parser()._subparsers._group_actions[0].choices  # type: ignore[union-attr]
     assert set(choices) == {"simulate", "can", "node", "launch", "bag"}
 
