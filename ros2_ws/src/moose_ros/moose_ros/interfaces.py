@@ -14,6 +14,7 @@ import os
 import re
 import types as pytypes
 from functools import lru_cache
+from importlib.resources import files
 from pathlib import Path
 from typing import Any
 
@@ -40,16 +41,21 @@ class UnknownMessageType(KeyError):
 
 
 def msg_dir() -> Path:
-    """Folder of our ``.msg`` files: $MOOSE_MSG_DIR, the ament index, or the source tree."""
+    """Folder of our ``.msg`` files: ``$MOOSE_MSG_DIR``, else the copy shipped in this package (package data:
+    ``moose_ros/msg``, a link to moose_msgs' in the source tree), else moose_msgs' share folder from the ament
+    index."""
     env = os.environ.get("MOOSE_MSG_DIR")
     if env:
         return Path(env)
+    shipped = Path(os.fspath(files("moose_ros").joinpath("msg")))
+    if any(shipped.glob("*.msg")):
+        return shipped
     try:
         from ament_index_python.packages import get_package_share_directory
 
         return Path(get_package_share_directory(MSG_PACKAGE)) / "msg"
-    except Exception:  # noqa: BLE001 - no ROS 2 here: use the repository layout
-        return Path(__file__).resolve().parents[2] / MSG_PACKAGE / "msg"
+    except Exception:  # noqa: BLE001 - PackageNotFoundError, or no ament_index_python at all
+        return shipped
 
 
 @lru_cache(maxsize=1)
@@ -59,7 +65,7 @@ def typestore() -> Any:
     folder = msg_dir()
     files = sorted(folder.glob("*.msg"))
     if not files:
-        raise FileNotFoundError(f"no .msg files in {folder}: set MOOSE_MSG_DIR to moose_msgs/msg")
+        raise FileNotFoundError(f"no .msg files in {folder}: reinstall moose_ros or set MOOSE_MSG_DIR to moose_msgs/msg")
     definitions: dict[str, Any] = {}
     for path in files:
         definitions.update(get_types_from_msg(path.read_text(encoding="utf-8"), f"{MSG_PACKAGE}/msg/{path.stem}"))
