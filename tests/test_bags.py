@@ -48,6 +48,8 @@ PUBLISHER = textwrap.dedent("""
 """)
 
 
+@pytest.mark.graph
+@pytest.mark.slow
 def test_record_round_trip_read_back_independently(tmp_path: Path) -> None:
     node = DdsNode("bag_test_recorder")
     recorder = Recorder(node, tmp_path / "bag", ["/vehicle/odom", "/perception/state"])
@@ -74,6 +76,8 @@ def test_record_round_trip_read_back_independently(tmp_path: Path) -> None:
 RECORDER = [sys.executable, "-m", "moose.cli", "bag", "record", "--topics", "/vehicle/odom", "-o"]
 
 
+@pytest.mark.graph
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
 def test_killed_recorder_leaves_a_readable_bag(tmp_path: Path, sig: int) -> None:
     """Killed 0.5 s after the last message was published, the recorder has lost nothing it received: every
@@ -139,6 +143,8 @@ def test_info_and_export(tmp_path: Path) -> None:
     assert table.num_rows == 46 and "accel_y[0]" in table.column_names and "status" in table.column_names
 
 
+@pytest.mark.graph
+@pytest.mark.slow
 def test_replay_drives_the_observer_to_the_recorded_estimates(tmp_path: Path) -> None:
     env = dict(os.environ)
     observer = subprocess.Popen([sys.executable, "-m", "moose_ros.nodes", "observer", "--param", "use_sim_time=true",

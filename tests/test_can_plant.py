@@ -30,6 +30,8 @@ from moose.vehicle import (
     initial_state,
 )
 
+pytestmark = [pytest.mark.can]
+
 DT = 0.01
 STOP = 1.2
 """The motion controller falls silent here."""

@@ -25,6 +25,8 @@ from moose.config import load_config
 from moose_ros.launch import launch
 from moose_ros.runtime import DdsNode
 
+pytestmark = [pytest.mark.graph, pytest.mark.slow]
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
