@@ -23,6 +23,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/bench_closed_loop.py
 	$(BIN)/python bench/bench_plant.py
 	$(BIN)/python bench/bench_graph.py
+	$(BIN)/python bench/bench_memory.py
 
 clean:
 	rm -rf $(VENV) runs

@@ -5,6 +5,8 @@ from __future__ import annotations
 import ast
 import dataclasses
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -95,3 +97,29 @@ def test_can_defaults_have_one_definition() -> None:
         fields = {f.name: f.default for f in dataclasses.fields(cls)}
         assert fields.get("can_channel") is None and fields.get("can_port") is None
     assert node_parameters("can_bridge", {})[1].can_interface == "udp_multicast"
+
+
+LEAN = ("motion_controller", "can_bridge", "weight_fbl")
+HEAVY = ("casadi", "moose.mpc", "moose.msf", "moose.maneuver", "scipy")
+
+
+def _loaded_after(code: str) -> list[str]:
+    probe = code + f"\nimport sys\nprint(sorted(m for m in {HEAVY!r} if m in sys.modules))"
+    result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    return ast.literal_eval(result.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.parametrize("name", LEAN)
+def test_a_lean_node_module_imports_neither_casadi_nor_the_planners(name: str) -> None:
+    assert _loaded_after(f"from moose_ros.nodes import node_class\nnode_class({name!r})") == []
+
+
+@pytest.mark.xfail(strict=True, reason="moose.config imports every block (CasADi included) to build Config; the light "
+                                       "parameter schema of issue 15 (core side) removes this")
+@pytest.mark.parametrize("name", ["motion_controller", "can_bridge"])
+def test_a_running_lean_node_has_not_loaded_casadi(name: str) -> None:
+    overrides = {"can_interface": "virtual", "can_channel": "lean-probe"} if name == "can_bridge" else {}
+    code = (f"from moose_ros.nodes import node_class\nfrom moose_ros.runtime import DdsNode\n"
+            f"rt = DdsNode({name!r}, overrides={overrides!r})\nnode = node_class({name!r})(rt)\nrt.shutdown()")
+    assert _loaded_after(code) == []
