@@ -18,19 +18,24 @@ from importlib.resources import files
 from pathlib import Path
 from typing import Any
 
-import cyclonedds.idl.types as idl
-from cyclonedds.idl import IdlStruct
 from rosbags.interfaces import Nodetype
 from rosbags.typesys import Stores, get_typestore, get_types_from_msg
 
 MSG_PACKAGE = "moose_msgs"
 
-_BASE = {  # byte and char are uint8 on the wire and in rmw_cyclonedds' type information
-    "bool": (bool, False), "byte": (idl.uint8, 0), "char": (idl.uint8, 0),
-    "int8": (idl.int8, 0), "uint8": (idl.uint8, 0), "int16": (idl.int16, 0), "uint16": (idl.uint16, 0),
-    "int32": (idl.int32, 0), "uint32": (idl.uint32, 0), "int64": (idl.int64, 0), "uint64": (idl.uint64, 0),
-    "float32": (idl.float32, 0.0), "float64": (idl.float64, 0.0), "string": (str, ""),
-}
+
+@lru_cache(maxsize=1)
+def _base_types() -> dict[str, tuple[Any, Any]]:
+    """IDL annotation and default of each base type (Cyclone DDS is imported only when a DDS type is built, so
+    the rclpy backend and the bag tools do without it)."""
+    import cyclonedds.idl.types as idl
+
+    return {  # byte and char are uint8 on the wire and in rmw_cyclonedds' type information
+        "bool": (bool, False), "byte": (idl.uint8, 0), "char": (idl.uint8, 0),
+        "int8": (idl.int8, 0), "uint8": (idl.uint8, 0), "int16": (idl.int16, 0), "uint16": (idl.uint16, 0),
+        "int32": (idl.int32, 0), "uint32": (idl.uint32, 0), "int64": (idl.int64, 0), "uint64": (idl.uint64, 0),
+        "float32": (idl.float32, 0.0), "float64": (idl.float64, 0.0), "string": (str, ""),
+    }
 
 
 class UnknownMessageType(KeyError):
@@ -103,11 +108,13 @@ def _field_type(node: tuple) -> tuple[Any, Any]:
     kind, detail = node
     if kind == Nodetype.BASE:
         base, _bound = detail
-        annotation, default = _BASE[base]
+        annotation, default = _base_types()[base]
         return annotation, (lambda d=default: d)
     if kind == Nodetype.NAME:
         cls = message_class(detail)
         return cls, cls
+    import cyclonedds.idl.types as idl
+
     element, size = detail
     inner, inner_default = _field_type(element)
     if kind == Nodetype.ARRAY:
@@ -118,6 +125,8 @@ def _field_type(node: tuple) -> tuple[Any, Any]:
 @lru_cache(maxsize=None)
 def message_class(type_name: str) -> type:
     """The DDS dataclass of ``pkg/msg/Type``; raises :class:`UnknownMessageType` (a KeyError) naming it."""
+    from cyclonedds.idl import IdlStruct
+
     check_type_name(type_name)
     store = typestore()
     if type_name not in store.fielddefs:
