@@ -9,7 +9,7 @@ STAMP  := $(VENV)/.installed
 
 $(STAMP): pyproject.toml ros2_ws/src/moose_ros/setup.py
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet -e '.[test]' -e ros2_ws/src/moose_ros
+	$(BIN)/python -m pip install --quiet -e '.[test]' -e 'ros2_ws/src/moose_ros[parquet]'
 	touch $(STAMP)
 
 run: $(STAMP)
@@ -23,6 +23,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/bench_closed_loop.py
 	$(BIN)/python bench/bench_plant.py
 	$(BIN)/python bench/bench_graph.py
+	$(BIN)/python bench/bench_memory.py
 
 clean:
 	rm -rf $(VENV) runs

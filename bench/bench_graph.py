@@ -22,8 +22,9 @@ import numpy as np
 
 from moose.scenario import load_scenario
 from moose_ros import convert as cv
+from moose_ros.graph import ACTUATOR_COMMAND, IMU, STATE
 from moose_ros.launch import launch
-from moose_ros.runtime import QOS_DEFAULT, QOS_SENSOR, DdsNode
+from moose_ros.runtime import QOS_SENSOR, DdsNode
 
 SIM_SECONDS = 30.0
 
@@ -81,9 +82,9 @@ def main() -> None:
         return callback
 
     monitor = DdsNode("latency_monitor")
-    monitor.subscription("sensor_msgs/msg/Imu", "/vehicle/imu", record("imu"), QOS_SENSOR)
-    monitor.subscription("moose_msgs/msg/StateEstimate", "/perception/state", record("state"), QOS_DEFAULT)
-    monitor.subscription("moose_msgs/msg/ActuatorCommand", "/control/actuator_command", record("command"), QOS_DEFAULT)
+    IMU.subscription(monitor, record("imu"))
+    STATE.subscription(monitor, record("state"))
+    ACTUATOR_COMMAND.subscription(monitor, record("command"))
     result: dict = {}
     runner = threading.Thread(target=lambda: result.update(
         launch(scenario, {"scenario": "paper_v5_tau3", "duration": SIM_SECONDS - 1.0}, out=io.StringIO())))

@@ -138,6 +138,7 @@ def test_timeout_sends_the_safe_state_within_one_command_cycle() -> None:
     assert bridge.guard.timed_out
 
 
+@pytest.mark.can
 def test_bridge_and_ecu_over_a_virtual_bus() -> None:
     car_side, bridge_side = open_bus("virtual", "moose-test-vbus"), open_bus("virtual", "moose-test-vbus")
     try:
@@ -177,6 +178,7 @@ def test_unknown_interface_is_refused() -> None:
         open_bus("serial", "x")
 
 
+@pytest.mark.can
 def test_dump_decodes_and_replay_sends_a_recorded_log(tmp_path) -> None:
     import io
 
@@ -205,10 +207,11 @@ def test_dump_decodes_and_replay_sends_a_recorded_log(tmp_path) -> None:
         replay(tmp_path / "missing.asc", sender)
 
 
+@pytest.mark.can
 def test_bridge_node_reports_a_bus_error_and_recovers(monkeypatch: pytest.MonkeyPatch) -> None:
     import time as _time
 
-    from moose_ros.nodes import CanBridge
+    from moose_ros.nodes.can_bridge import CanBridge
     from moose_ros.runtime import DdsNode
 
     node = DdsNode("can_bridge", overrides={"can_interface": "virtual", "can_channel": "moose-test-buserror"})

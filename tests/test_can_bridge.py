@@ -176,6 +176,7 @@ def test_backoff_doubles_up_to_its_cap_and_resets_after_healthy_traffic() -> Non
         HealthParams(backoff_initial=0.1, backoff_max=0.05)
 
 
+@pytest.mark.can
 def test_bus_link_reopens_a_failed_bus_after_the_backoff() -> None:
     interface = ["socketcan"]  # no SocketCAN in this kernel: opening really fails
     health = BusHealth(HealthParams(backoff_initial=0.1, backoff_max=1.0))
@@ -213,6 +214,7 @@ def test_ecu_saturates_sensors_and_skips_non_finite_samples() -> None:
         VehicleEcu(timeout=0.0)
 
 
+@pytest.mark.can
 def test_bus_link_logs_every_frame_in_candump_format(tmp_path) -> None:
     path = tmp_path / "traffic.log"
     peer = open_bus("virtual", "moose-test-log")

@@ -22,6 +22,8 @@ from moose.signals import EpsSample, GpsSample, ImuSample, WheelSpeedSample
 from moose.vehicle import DELTA, OMEGA_RL, OMEGA_RR, VX, VehiclePlant, X, Y, initial_state
 from moose.schema import SensorParams
 
+pytestmark = [pytest.mark.can]
+
 DT = 0.01
 STOP = 1.2
 """The motion controller falls silent here."""

@@ -28,6 +28,8 @@ from moose.canbus.health import BusHealth
 from moose.canbus.safety import Command
 from moose.signals import EpsSample, GpsSample, ImuSample, WheelSpeedSample
 
+pytestmark = [pytest.mark.can]
+
 RUN_S = 1.5
 """How long the bridge commands (wall clock)."""
 

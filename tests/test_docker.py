@@ -23,18 +23,22 @@ def test_dockerfile_builds_every_workspace_package_on_jazzy() -> None:
     assert "COPY ros2_ws/src" in text and "colcon build" in text
     for path in re.findall(r"^COPY (\S+) ", text, re.M):
         assert (ROOT / path).exists(), path
-    assert "pip install" in text and "COPY src ./src" in text  # the core is installed from the copied source
+    # the install path of tests/test_install.py: wheels of both packages, installed with their dependencies; the
+    # data files ship inside the core's wheel (no COPY config)
+    assert "COPY src ./src" in text and "COPY config" not in text
+    assert "pip wheel --no-cache-dir --no-deps -w /tmp/wheels . ros2_ws/src/moose_ros" in text
+    assert re.search(r"pip install --no-cache-dir /tmp/wheels/moose_avoidance-\*\.whl .*moose_ros-\*\.whl", text)
 
 
 def test_compose_services_launch_existing_groups_and_executables() -> None:
+    from moose_ros.graph import GROUPS, NODES
+
     compose = yaml.safe_load((ROOT / "docker" / "compose.yaml").read_text())
-    launch_file = WORKSPACE / "moose_ros" / "launch" / "moose_graph.launch.py"
-    groups = ast.literal_eval(re.search(r"GROUPS = (\{.*?\n\})", launch_file.read_text(), re.S).group(1))
     setup = (WORKSPACE / "moose_ros" / "setup.py").read_text()
     executables = set(ast.literal_eval(re.search(r"NODES = (\[.*?\])", setup, re.S).group(1)))
-    assert {n for g in groups.values() for n in g} == executables
+    assert {n for g in GROUPS.values() for n in g} == executables == set(NODES)
     services = compose["services"]
-    assert set(services) == set(groups)
+    assert set(services) == set(GROUPS)
     for name, service in services.items():
         assert service["command"][:4] == ["ros2", "launch", "moose_ros", "moose_graph.launch.py"]
         assert service["command"][4] == f"group:={name}"

@@ -25,6 +25,8 @@ from moose.config import load_config
 from moose_ros.launch import launch
 from moose_ros.runtime import DdsNode
 
+pytestmark = [pytest.mark.graph, pytest.mark.slow]
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -193,9 +195,9 @@ def test_graph_through_the_can_bridge_and_ecu_emulator_reproduces_the_outcome(tm
     log = tmp_path / "bridge.log"
     out = io.StringIO()
     pid = os.getpid()
-    summary = launch(scenario, {"scenario": "paper_v7_tau1.4", "can_log": str(log)}, graph="can", out=out,
-                     can_params={"can_interface": "udp_multicast", "can_channel": f"239.74.{pid % 250}.{1 + pid % 199}",
-                                 "can_port": claim_udp_port()})
+    summary = launch(scenario, {"scenario": "paper_v7_tau1.4", "can_log": str(log), "can_interface": "udp_multicast",
+                                "can_channel": f"239.74.{pid % 250}.{1 + pid % 199}", "can_port": claim_udp_port()},
+                     graph="can", out=out)
     assert "[can_bridge]" in out.getvalue()
     assert summary["node_exits"]["vehicle_simulator"] == 0
     assert summary["collided"] is False and summary["left_field"] is False

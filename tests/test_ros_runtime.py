@@ -23,6 +23,8 @@ from moose_ros.runtime import (
     QOS_DEFAULT, QOS_LATCHED, QOS_SENSOR, DdsNode, Qos, create_node, dds_topic_name, resolve_topic,
 )
 
+pytestmark = [pytest.mark.graph]
+
 WHEELS = "moose_msgs/msg/WheelSpeeds"
 
 

@@ -18,17 +18,19 @@ node graph reproduces the lockstep loop by construction, not by care.
 from __future__ import annotations
 
 import dataclasses
-from typing import Optional
+from typing import TYPE_CHECKING, Optional
 
 import numpy as np
 
 from .fbl import FeedbackLinearization
-from .maneuver import MaxSteeringTable
-from .mpc import MpcPlanner
-from .msf import MsfPlanner
 from .schema import Config, PlannerMode
 from .signals import Blend, PlannerInput, PlanResult, Reference, StateEstimate, Threat
 from .weight import WeightFunction
+
+if TYPE_CHECKING:  # the planners (CasADi) are imported only where they run, not in the weight_fbl node
+    from .maneuver import MaxSteeringTable
+    from .mpc import MpcPlanner
+    from .msf import MsfPlanner
 
 
 @dataclasses.dataclass(frozen=True)
@@ -58,18 +60,23 @@ class PlanningStep:
     node, whose planners are other processes.
     """
 
-    def __init__(self, config: Config, mode: PlannerMode | None = None, table: Optional[MaxSteeringTable] = None,
+    def __init__(self, config: Config, mode: PlannerMode | None = None, table: Optional["MaxSteeringTable"] = None,
                  planners: bool = True) -> None:
         self.mode: PlannerMode = mode or config.simulation.planner
         self.grid = config.grid
         model = config.model_vehicle
         self.fbl = FeedbackLinearization(config.fbl, model, self.grid.t_s)
         self.weight = WeightFunction(config.weight, self.fbl)
-        self.mpc: Optional[MpcPlanner] = None
-        self.msf: Optional[MsfPlanner] = None
+        self.mpc: Optional["MpcPlanner"] = None
+        self.msf: Optional["MsfPlanner"] = None
         if planners and self.mode != "msf":
+            from .mpc import MpcPlanner
+
             self.mpc = MpcPlanner(config.mpc, self.grid)
         if planners and self.mode != "mpc":
+            from .maneuver import MaxSteeringTable
+            from .msf import MsfPlanner
+
             self.msf = MsfPlanner(config.msf, self.grid, table or MaxSteeringTable.build(model, config.maneuver))
         self.fbl_at_motion_rate = config.simulation.steering_fbl_at_motion_rate
         self.guess: Optional[np.ndarray] = None

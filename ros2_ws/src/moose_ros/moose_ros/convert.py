@@ -6,13 +6,15 @@ and the DDS dataclasses.
 from __future__ import annotations
 
 import math
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 import numpy as np
 
 from moose.signals import (
     Blend, EpsSample, GpsSample, ImuSample, Obstacle, PlanResult, Reference, StateEstimate, Threat, WheelSpeedSample,
 )
+
+from .graph import GPS, IMU, STEERING, WHEEL_SPEEDS, Topic
 
 STATUS_CODES = {"converged": 0, "capped": 1, "failed": 2, "over_budget": 3, "ok": 4, "idle": 5}
 STATUS_NAMES = {code: name for name, code in STATUS_CODES.items()}
@@ -207,3 +209,12 @@ def diagnostic_to_msg(node: Any, t: float, name: str, level: int, message: str, 
     stamp(msg, t, "")
     msg.status = [status]
     return msg
+
+
+SENSOR_SAMPLES: dict[type, tuple[Topic, Callable[[Any, Any], Any]]] = {
+    ImuSample: (IMU, imu_to_msg),
+    GpsSample: (GPS, gps_to_msg),
+    WheelSpeedSample: (WHEEL_SPEEDS, wheels_to_msg),
+    EpsSample: (STEERING, steering_to_msg),
+}
+"""The topic and the converter of each vehicle sensor sample (simulator, CAN bridge, bags of lockstep runs)."""

@@ -14,22 +14,28 @@ import os
 import re
 import types as pytypes
 from functools import lru_cache
+from importlib.resources import files
 from pathlib import Path
 from typing import Any
 
-import cyclonedds.idl.types as idl
-from cyclonedds.idl import IdlStruct
 from rosbags.interfaces import Nodetype
 from rosbags.typesys import Stores, get_typestore, get_types_from_msg
 
 MSG_PACKAGE = "moose_msgs"
 
-_BASE = {  # byte and char are uint8 on the wire and in rmw_cyclonedds' type information
-    "bool": (bool, False), "byte": (idl.uint8, 0), "char": (idl.uint8, 0),
-    "int8": (idl.int8, 0), "uint8": (idl.uint8, 0), "int16": (idl.int16, 0), "uint16": (idl.uint16, 0),
-    "int32": (idl.int32, 0), "uint32": (idl.uint32, 0), "int64": (idl.int64, 0), "uint64": (idl.uint64, 0),
-    "float32": (idl.float32, 0.0), "float64": (idl.float64, 0.0), "string": (str, ""),
-}
+
+@lru_cache(maxsize=1)
+def _base_types() -> dict[str, tuple[Any, Any]]:
+    """IDL annotation and default of each base type (Cyclone DDS is imported only when a DDS type is built, so
+    the rclpy backend and the bag tools do without it)."""
+    import cyclonedds.idl.types as idl
+
+    return {  # byte and char are uint8 on the wire and in rmw_cyclonedds' type information
+        "bool": (bool, False), "byte": (idl.uint8, 0), "char": (idl.uint8, 0),
+        "int8": (idl.int8, 0), "uint8": (idl.uint8, 0), "int16": (idl.int16, 0), "uint16": (idl.uint16, 0),
+        "int32": (idl.int32, 0), "uint32": (idl.uint32, 0), "int64": (idl.int64, 0), "uint64": (idl.uint64, 0),
+        "float32": (idl.float32, 0.0), "float64": (idl.float64, 0.0), "string": (str, ""),
+    }
 
 
 class UnknownMessageType(KeyError):
@@ -40,16 +46,21 @@ class UnknownMessageType(KeyError):
 
 
 def msg_dir() -> Path:
-    """Folder of our ``.msg`` files: $MOOSE_MSG_DIR, the ament index, or the source tree."""
+    """Folder of our ``.msg`` files: ``$MOOSE_MSG_DIR``, else the copy shipped in this package (package data:
+    ``moose_ros/msg``, a link to moose_msgs' in the source tree), else moose_msgs' share folder from the ament
+    index."""
     env = os.environ.get("MOOSE_MSG_DIR")
     if env:
         return Path(env)
+    shipped = Path(os.fspath(files("moose_ros").joinpath("msg")))
+    if any(shipped.glob("*.msg")):
+        return shipped
     try:
         from ament_index_python.packages import get_package_share_directory
 
         return Path(get_package_share_directory(MSG_PACKAGE)) / "msg"
-    except Exception:  # noqa: BLE001 - no ROS 2 here: use the repository layout
-        return Path(__file__).resolve().parents[2] / MSG_PACKAGE / "msg"
+    except Exception:  # noqa: BLE001 - PackageNotFoundError, or no ament_index_python at all
+        return shipped
 
 
 @lru_cache(maxsize=1)
@@ -59,7 +70,7 @@ def typestore() -> Any:
     folder = msg_dir()
     files = sorted(folder.glob("*.msg"))
     if not files:
-        raise FileNotFoundError(f"no .msg files in {folder}: set MOOSE_MSG_DIR to moose_msgs/msg")
+        raise FileNotFoundError(f"no .msg files in {folder}: reinstall moose_ros or set MOOSE_MSG_DIR to moose_msgs/msg")
     definitions: dict[str, Any] = {}
     for path in files:
         definitions.update(get_types_from_msg(path.read_text(encoding="utf-8"), f"{MSG_PACKAGE}/msg/{path.stem}"))
@@ -97,11 +108,13 @@ def _field_type(node: tuple) -> tuple[Any, Any]:
     kind, detail = node
     if kind == Nodetype.BASE:
         base, _bound = detail
-        annotation, default = _BASE[base]
+        annotation, default = _base_types()[base]
         return annotation, (lambda d=default: d)
     if kind == Nodetype.NAME:
         cls = message_class(detail)
         return cls, cls
+    import cyclonedds.idl.types as idl
+
     element, size = detail
     inner, inner_default = _field_type(element)
     if kind == Nodetype.ARRAY:
@@ -112,6 +125,8 @@ def _field_type(node: tuple) -> tuple[Any, Any]:
 @lru_cache(maxsize=None)
 def message_class(type_name: str) -> type:
     """The DDS dataclass of ``pkg/msg/Type``; raises :class:`UnknownMessageType` (a KeyError) naming it."""
+    from cyclonedds.idl import IdlStruct
+
     check_type_name(type_name)
     store = typestore()
     if type_name not in store.fielddefs:

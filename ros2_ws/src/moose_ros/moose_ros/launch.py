@@ -11,6 +11,7 @@ A node that dies is reported, and the rest of the graph keeps running.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import os
 import signal
@@ -24,6 +25,7 @@ import numpy as np
 
 from moose.config import load_config
 from moose.metrics import summarize
+from moose.params import ParamError, read_ros_params
 from moose.scenario import Scenario
 from moose.signals import Blend, Reference
 from moose.planning import PlanningRecord
@@ -32,19 +34,10 @@ from moose.simulation import SimulationResult
 
 from . import convert as cv
 from .bag import Recorder
-from .runtime import QOS_DEFAULT, QOS_SENSOR, DdsNode
-
-GRAPHS = {
-    "full": ["vehicle_simulator", "observer", "obstacle_detector", "mpc_planner", "msf_planner", "weight_fbl",
-             "motion_controller"],
-    "car": ["observer", "obstacle_detector", "mpc_planner", "msf_planner", "weight_fbl", "motion_controller",
-            "can_bridge"],
-    "can": ["vehicle_simulator", "observer", "obstacle_detector", "mpc_planner", "msf_planner", "weight_fbl",
-            "motion_controller", "can_bridge"],
-}
-"""``full``: with the vehicle simulator on topics; ``car``: the graph that runs on the vehicle (sensors and
-actuators through the CAN bridge); ``can``: ``car`` plus the simulator as the vehicle-side ECU emulator
-behind the DBC, over ``udp_multicast`` here."""
+from .graph import BLEND, DIAGNOSTICS, GRAPHS, ODOM, PLAN_MPC, STEERING, THREAT
+from .parameters import check_parameter_file, node_parameters, parameter_names
+from .runtime import DdsNode
+from .runtime.base import set_dotted
 
 
 @dataclasses.dataclass
@@ -63,12 +56,12 @@ class Monitor:
     finished: bool = False
 
     def attach(self, node: DdsNode) -> None:
-        node.subscription("nav_msgs/msg/Odometry", "/vehicle/odom", self.on_odom, QOS_SENSOR)
-        node.subscription("moose_msgs/msg/SteeringReport", "/vehicle/steering", lambda m: setattr(self, "delta", m.delta), QOS_SENSOR)
-        node.subscription("moose_msgs/msg/PlannerOutput", "/planning/mpc", self.on_mpc, QOS_DEFAULT)
-        node.subscription("moose_msgs/msg/Blend", "/planning/blend", lambda m: self.weights.__setitem__(cv.time_of(m), m.weight_mpc), QOS_DEFAULT)
-        node.subscription("moose_msgs/msg/Threat", "/perception/threat", self.on_threat, QOS_DEFAULT)
-        node.subscription("diagnostic_msgs/msg/DiagnosticArray", "/diagnostics", self.on_diagnostics, QOS_DEFAULT)
+        ODOM.subscription(node, self.on_odom)
+        STEERING.subscription(node, lambda m: setattr(self, "delta", m.delta))
+        PLAN_MPC.subscription(node, self.on_mpc)
+        BLEND.subscription(node, lambda m: self.weights.__setitem__(cv.time_of(m), m.weight_mpc))
+        THREAT.subscription(node, self.on_threat)
+        DIAGNOSTICS.subscription(node, self.on_diagnostics)
 
     def on_odom(self, m: Any) -> None:
         p, q, v = m.pose.pose.position, m.pose.pose.orientation, m.twist.twist.linear
@@ -101,11 +94,63 @@ class Monitor:
                                 self.config, self.scenario.lead_time + self.scenario.duration)
 
 
+def _file_params(params_file: Optional[str], node: str) -> dict[str, Any]:
+    return read_ros_params(params_file, node) if params_file else {}
+
+
+def planner_mode(planner: Optional[str], params_file: Optional[str]) -> str:
+    """``planner``, or the mode ``weight_fbl`` reads from the parameter file (``simulation.planner``)."""
+    if params_file:
+        check_parameter_file(params_file)
+    return planner or node_parameters("weight_fbl", _file_params(params_file, "weight_fbl"))[0].simulation.planner
+
+
+def node_overrides(graph: str, planner: str, params: Optional[dict[str, Any]] = None,
+                   params_file: Optional[str] = None, seed: int = 0, rate: float = 1.0) -> dict[str, dict[str, Any]]:
+    """Each node's parameter overrides for one run of ``graph`` with ``planner``, checked before anything starts.
+
+    ``params`` go to every node that takes them (:mod:`moose_ros.parameters`; dotted keys of the core's
+    groups go to all); a key that no node of the graph takes is an error, and so is any parameter that a node
+    would refuse (the file's values included), so a bad configuration stops the launch before a node runs.
+    The planner node that ``planner`` does not use is left out.
+    """
+    nodes = [n for n in GRAPHS[graph] if not (planner == "mpc" and n == "msf_planner")
+             and not (planner == "msf" and n == "mpc_planner")]
+    given = dict(params or {}, **{"simulation.planner": planner})
+    simulated = "vehicle_simulator" in nodes
+    if simulated:
+        given.update(seed=seed, rate=rate, vehicle_bus="can" if "can_bridge" in nodes else "topics")
+    if "can_interface" in given:
+        from moose.canbus.bus import INTERFACES
+
+        if given["can_interface"] not in INTERFACES:
+            raise ParamError(f"can_interface = {given['can_interface']!r} is invalid: expected one of {list(INTERFACES)}")
+    taken = set().union(*(parameter_names(n) for n in nodes))
+    unknown = sorted(k for k in given if "." not in k and k not in taken)
+    if unknown:
+        raise ParamError(f"{unknown[0]} = {given[unknown[0]]!r} is taken by no node of the graph {graph!r} "
+                         f"({', '.join(nodes)})")
+    out: dict[str, dict[str, Any]] = {}
+    for name in nodes:
+        own = parameter_names(name)
+        overrides = {k: v for k, v in given.items() if "." in k or k in own}
+        # simulated time only when the simulator is there to publish /clock (not on the car)
+        overrides["use_sim_time"] = simulated and name != "vehicle_simulator"
+        if name == "vehicle_simulator":
+            overrides["wait_for"] = [n for n in nodes if n != name]
+        merged = _file_params(params_file, name)
+        for key, value in overrides.items():
+            set_dotted(merged, key, value)
+        node_parameters(name, merged)  # refuses what the node would refuse
+        out[name] = overrides
+    return out
+
+
 def launch(
     scenario: Scenario,
-    scenario_params: dict[str, Any],
+    params: dict[str, Any],
     graph: str = "full",
-    planner: str = "combined",
+    planner: Optional[str] = None,
     seed: int = 0,
     params_file: Optional[str] = None,
     rate: float = 1.0,
@@ -113,11 +158,23 @@ def launch(
     kill_after: Optional[tuple[str, float]] = None,
     out=sys.stdout,
     bag: Optional[Any] = None,
-    can_params: Optional[dict[str, Any]] = None,
 ) -> dict[str, Any]:
-    """Run the graph once and return the summary (plus ``node_exits`` and ``diagnostics``)."""
-    nodes = [n for n in GRAPHS[graph] if not (planner == "mpc" and n == "msf_planner") and not (planner == "msf" and n == "mpc_planner")]
-    common = dict(scenario_params, seed=seed, planner=planner, **(can_params or {}))
+    """Run the graph once and return the summary (plus ``node_exits`` and ``diagnostics``).
+
+    ``params``: node parameters (``scenario`` or the ad-hoc ``speed``/``tau``/…, ``can_interface``, …) given
+    to every node that takes them; see :func:`node_overrides`."""
+    planner = planner_mode(planner, params_file)
+    if scenario.mu is not None:  # the road of this run, for every node: one friction in the whole graph
+        params = {"vehicle.mu": scenario.mu, **params}
+    overrides = node_overrides(graph, planner, params, params_file, seed, rate)
+    monitor = Monitor(scenario, scenario.configure(load_config(params_file)))
+    node = DdsNode("moose_monitor", overrides={"use_sim_time": False})
+    monitor.attach(node)
+    try:
+        recorder = Recorder(node, bag) if bag is not None else None  # an unusable path stops the launch here
+    except Exception:
+        node.shutdown()
+        raise
     procs: dict[str, subprocess.Popen] = {}
     lock = threading.Lock()
 
@@ -128,26 +185,16 @@ def launch(
                 out.write(f"[{name}] {line}")
                 out.flush()
 
-    for name in nodes:
-        # simulated time only when the simulator is there to publish /clock (not on the car)
-        overrides = dict(common, use_sim_time="vehicle_simulator" in nodes and name != "vehicle_simulator")
-        if name == "vehicle_simulator":
-            overrides["rate"] = rate
-            overrides["vehicle_bus"] = "can" if "can_bridge" in nodes else "topics"
-            overrides["wait_for"] = "[" + ", ".join(n for n in nodes if n != name) + "]"
+    for name, given in overrides.items():
         cmd = [sys.executable, "-m", "moose_ros.nodes", name]
         if params_file:
             cmd += ["--params", params_file]
-        for key, value in overrides.items():
-            cmd += ["--param", f"{key}={value}"]
+        for key, value in given.items():
+            cmd += ["--param", f"{key}={json.dumps(value)}"]
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=os.environ.copy())
         procs[name] = proc
         threading.Thread(target=stream, args=(name, proc), daemon=True).start()
 
-    monitor = Monitor(scenario, scenario.configure(load_config(params_file)))
-    node = DdsNode("moose_monitor", overrides={"use_sim_time": False})
-    monitor.attach(node)
-    recorder = Recorder(node, bag) if bag is not None else None
     exits: dict[str, int] = {}
     limit = time.monotonic() + (duration if duration is not None else (scenario.lead_time + scenario.duration) / rate + 60.0)
     stop = threading.Event()

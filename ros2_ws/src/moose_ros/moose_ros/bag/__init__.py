@@ -1,0 +1,24 @@
+"""ROS 2 bags (MCAP storage) of the graph: write, read (also after a crash), record, play, export, re-plan.
+
+Bags are ROS 2 bag directories (``metadata.yaml`` + ``.mcap``), CDR messages with their definitions
+embedded, so ``ros2 bag info/play``, rosbags and Foxglove open them.  Only public APIs of ``mcap`` and
+``rosbags`` are used.
+
+Modules: :mod:`.writer` (:class:`BagWriter`: crash-safe writing), :mod:`.reader` (:func:`read_bag`,
+recovery of unfinished files, :func:`bag_info`), :mod:`.record` (:class:`Recorder` of a running graph,
+:func:`record_result` of a lockstep run, :func:`record_simulation`: the recorder plugin of ``moose
+simulate``), :mod:`.play`, :mod:`.export` (CSV, Parquet), :mod:`.replan` (open-loop re-planning and
+its figure).
+"""
+from .errors import BagError
+from .export import export, flatten
+from .play import play
+from .reader import BagMessage, bag_info, read_bag
+from .record import Recorder, record_result, record_simulation
+from .replan import plot_replan, replan
+from .writer import BagWriter
+
+__all__ = [
+    "BagError", "BagMessage", "BagWriter", "Recorder", "bag_info", "export", "flatten", "play", "plot_replan",
+    "read_bag", "record_result", "record_simulation", "replan",
+]

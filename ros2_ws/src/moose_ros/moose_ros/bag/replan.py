@@ -1,0 +1,94 @@
+"""Re-plan a bag open-loop: the planners on its recorded state and threats at its planning instants, compared
+with what was recorded (``moose bag replan``), and the figure of the comparison.
+
+Each planning instant runs the core's planning step (:class:`moose.planning.PlanningStep`), the code
+the lockstep loop and the ``weight_fbl`` node run.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any, Optional
+
+from ..graph import BLEND, PLAN_MPC, PLAN_MSF, STATE, THREAT
+from ..interfaces import from_rosbags
+from .errors import BagError
+from .reader import read_bag
+
+
+def replan(path: str | Path, config: Any, planner: str = "combined", v_des: Optional[float] = None) -> dict[str, Any]:
+    """Run the planners open-loop on a bag's recorded state/threat stream at its planning instants.
+
+    Each instant (a recorded /planning/blend) gets the latest recorded estimate and threat;
+    the MPC's initial guess is the *re-computed* previous blend, shifted; ``v_des`` defaults
+    to the speed at the first recorded estimate.  Returns per-step
+    rows (recorded vs re-computed first accelerations, weights, statuses) and a summary.
+    """
+    import numpy as np
+
+    from moose.planning import PlanningStep
+
+    from .. import convert as cv
+
+    step = PlanningStep(config, planner)  # type: ignore[arg-type]
+    estimate = threat = None
+    recorded_plans: dict[str, dict[float, Any]] = {"mpc": {}, "msf": {}}
+    rows = []
+    for m in read_bag(path, [STATE.name, THREAT.name, PLAN_MPC.name, PLAN_MSF.name, BLEND.name]):
+        msg = from_rosbags(m.msg, m.type_name)
+        if m.topic == STATE.name:
+            estimate = cv.estimate_from_msg(msg)
+            v_des = round(estimate.vx, 1) if v_des is None else v_des
+        elif m.topic == THREAT.name:
+            threat = cv.threat_from_msg(msg)
+        elif m.topic in (PLAN_MPC.name, PLAN_MSF.name):
+            recorded_plans[msg.planner][round(cv.time_of(msg), 6)] = cv.plan_from_msg(msg)
+        elif estimate is not None:
+            t = cv.time_of(msg)
+            record = step.plan(t, estimate, threat, float(v_des))
+            blend, new_mpc = record.blend, record.mpc
+            old_mpc = recorded_plans["mpc"].get(round(t, 6))
+            rows.append({
+                "t": t,
+                "recorded_weight": msg.weight_mpc, "weight": blend.weight_mpc,
+                "recorded_ax": msg.accel_x[0], "ax": float(blend.accel[0, 0]),
+                "recorded_ay": msg.accel_y[0], "ay": float(blend.accel[0, 1]),
+                "recorded_delta": msg.delta_ref, "delta": record.reference.delta,
+                "recorded_mpc_status": old_mpc.status if old_mpc is not None else "",
+                "mpc_status": new_mpc.status if new_mpc is not None else "",
+                "mpc_solve_ms": new_mpc.solve_time_s * 1e3 if new_mpc is not None else math.nan,
+            })
+    if not rows:
+        raise BagError(f"bag {str(path)!r} has no planning instants ({BLEND.name} with {STATE.name})")
+    diff = lambda a, b: float(np.sqrt(np.mean([(r[a] - r[b]) ** 2 for r in rows])))  # noqa: E731
+    same = [r for r in rows if r["recorded_mpc_status"]]
+    summary = {
+        "steps": len(rows), "planner": planner,
+        "rms_ax": diff("recorded_ax", "ax"), "rms_ay": diff("recorded_ay", "ay"),
+        "rms_weight": diff("recorded_weight", "weight"), "rms_delta": diff("recorded_delta", "delta"),
+        "mpc_status_agreement": (sum(r["recorded_mpc_status"] == r["mpc_status"] for r in same) / len(same)) if same else None,
+    }
+    return {"summary": summary, "rows": rows}
+
+
+def plot_replan(rows: list[dict[str, Any]], path: str | Path) -> Path:
+    """Recorded vs re-computed blend acceleration, weight and steering reference over time."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = [r["t"] for r in rows]
+    fig, axes = plt.subplots(3, 1, figsize=(7.0, 7.0), sharex=True)
+    for ax, (key, label) in zip(axes, (("ay", "v̇_Y* (m/s²)"), ("weight", "w_MPC"), ("delta", "δ* (rad)"))):
+        ax.step(t, [r[f"recorded_{key}"] for r in rows], where="post", label="recorded")
+        ax.step(t, [r[key] for r in rows], where="post", label="re-computed", linestyle="--")
+        ax.set_ylabel(label)
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7, frameon=False)
+    axes[-1].set_xlabel("t (s)")
+    fig.tight_layout()
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)

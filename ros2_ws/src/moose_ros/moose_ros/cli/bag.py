@@ -1,0 +1,104 @@
+"""``moose bag``: record, play, inspect, export and re-plan ROS 2 bags (MCAP)."""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from moose.cli.common import positive_float, run_folder
+from moose.params import ParamError
+
+
+def add_subparser(subparsers: Any) -> None:
+    bag = subparsers.add_parser("bag", help="record, play, inspect, export and re-plan ROS 2 bags (MCAP)")
+    bag_sub = bag.add_subparsers(dest="bag_command", required=True)
+    record = bag_sub.add_parser("record", help="record topics of the running graph")
+    record.add_argument("-o", "--output", help="bag directory to create")
+    record.add_argument("--topics", nargs="+", help="topics to record")
+    record.add_argument("--all", action="store_true", help="record every topic of the graph (default)")
+    record.add_argument("--duration", type=positive_float, help="stop after this many seconds")
+    play = bag_sub.add_parser("play", help="publish a bag into the graph with its original timing")
+    play.add_argument("path")
+    play.add_argument("--rate", type=positive_float, default=1.0)
+    play.add_argument("--topics", nargs="+")
+    play.add_argument("--loop", action="store_true")
+    play.add_argument("--start", type=float, default=0.0, help="skip this many seconds of the bag")
+    play.add_argument("--clock", action="store_true", help="publish /clock from the bag's timestamps")
+    info = bag_sub.add_parser("info", help="topics, types, counts, rates, duration")
+    info.add_argument("path")
+    export = bag_sub.add_parser("export", help="export topics to CSV or Parquet (one file per topic)")
+    export.add_argument("--format", choices=["csv", "parquet"], default="csv")
+    export.add_argument("path")
+    export.add_argument("-o", "--output", required=True, help="output folder")
+    export.add_argument("--topics", nargs="+")
+    replan = bag_sub.add_parser("replan", help="run the planners open-loop on a bag's recorded state and threats")
+    replan.add_argument("path")
+    replan.add_argument("--planner", choices=["combined", "mpc", "msf"], default="combined")
+    replan.add_argument("--params", help="ROS 2 parameter file with the parameters to judge")
+    replan.add_argument("--v-des", type=positive_float, help="desired speed (default: speed at the first estimate)")
+    replan.add_argument("--plot", help="write recorded vs re-computed references (PNG)")
+    for parser_ in (record, play, info, export, replan):
+        parser_.set_defaults(func=cmd_bag)
+
+
+def cmd_bag(args: argparse.Namespace) -> int:
+    from .. import bag
+
+    try:
+        if args.bag_command == "info":
+            info = bag.bag_info(args.path)
+            print(f"bag       {info['path']}\nduration  {info['duration_s']:.3f} s\nmessages  {info['messages']}")
+            for topic, e in info["topics"].items():
+                print(f"  {topic:<28} {e['type']:<36} {e['count']:>7}  {e['rate_hz']:8.2f} Hz")
+        elif args.bag_command == "export":
+            for path in bag.export(args.path, args.output, args.topics, args.format):
+                print(path)
+        elif args.bag_command == "replan":
+            from moose.config import load_config
+
+            result = bag.replan(args.path, load_config(args.params), args.planner, args.v_des)
+            summary = result["summary"]
+            print("  t (s)   w rec / new    v̇_Y rec / new (m/s²)   δ* rec / new (rad)   MPC status rec / new")
+            for r in result["rows"]:
+                print(f"{r['t']:7.2f}   {r['recorded_weight']:5.2f} / {r['weight']:5.2f}   {r['recorded_ay']:8.3f} / {r['ay']:8.3f}"
+                      f"      {r['recorded_delta']:6.3f} / {r['delta']:6.3f}     {r['recorded_mpc_status'] or '-'} / {r['mpc_status'] or '-'}")
+            print(json.dumps(summary, indent=2))
+            if args.plot:
+                print(f"figure {bag.plot_replan(result['rows'], args.plot)}")
+        elif args.bag_command == "record":
+            return _record(bag, args)
+        elif args.bag_command == "play":
+            from ..runtime import DdsNode
+
+            node = DdsNode("moose_bag_play")
+            sent = bag.play(args.path, node, rate=args.rate, topics=args.topics, loop=args.loop, start=args.start,
+                            clock=args.clock)
+            print(f"played {sent} messages")
+    except bag.BagError as exc:
+        raise ParamError(str(exc)) from None
+    return 0
+
+
+def _record(bag: Any, args: argparse.Namespace) -> int:
+    import signal
+    import threading
+    import time
+
+    from ..runtime import DdsNode
+
+    node = DdsNode("moose_bag_record")
+    path = Path(args.output) if args.output else run_folder("record", "graph") / "bag"
+    recorder = bag.Recorder(node, path, None if args.all else args.topics)
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    print(f"recording into {path} (Ctrl-C to stop)", flush=True)
+    start = time.monotonic()
+    try:
+        while not stop.is_set() and (args.duration is None or time.monotonic() - start < args.duration):
+            node.spin_once(0.05)
+    finally:
+        recorder.close()
+    print(f"recorded {dict(recorder.writer.counts)}")
+    return 0

@@ -1,0 +1,56 @@
+"""``moose launch [GRAPH]``: run the whole node graph as separate processes, summarised like ``moose simulate``."""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+from pathlib import Path
+from typing import Any
+
+from moose.cli.common import add_scenario_arguments, positive_float, run_folder, scenario_from_args
+from moose.cli.simulate import format_summary
+from moose.params import ParamError
+
+from ..graph import GRAPHS
+
+
+def add_subparser(subparsers: Any) -> None:
+    launch = subparsers.add_parser("launch", help="run the whole node graph as separate processes")
+    launch.add_argument("graph", nargs="?", default="full", choices=list(GRAPHS),
+                        help="full (simulator on topics), car (CAN bridge, no simulator) or can (both over the DBC)")
+    launch.add_argument("--can-interface", help="udp_multicast (default), socketcan or virtual")
+    launch.add_argument("--can-channel", help="multicast group (default: moose.canbus.bus.DEFAULT_GROUP) / socketcan device")
+    launch.add_argument("--can-port", type=int, help="UDP port of udp_multicast (default: moose.canbus.bus.DEFAULT_PORT)")
+    add_scenario_arguments(launch)
+    launch.add_argument("--rate", type=positive_float, default=1.0, help="simulated seconds per wall-clock second")
+    launch.add_argument("--json", help="write the summary as JSON to this path")
+    launch.add_argument("--bag", help="record every topic into this bag directory (default: a new folder under runs/)")
+    launch.add_argument("--no-bag", action="store_true", help="do not record a bag")
+    launch.set_defaults(func=cmd_launch)
+
+
+def cmd_launch(args: argparse.Namespace) -> int:
+    from ..bag import BagError
+    from ..launch import launch, planner_mode
+    from ..parameters import ScenarioParams
+
+    scenario = scenario_from_args(args)
+    scenario_fields = [f.name for f in dataclasses.fields(ScenarioParams)]
+    params = {k: getattr(args, k) for k in scenario_fields if getattr(args, k) is not None}
+    params.update({f"can_{k}": getattr(args, f"can_{k}") for k in ("interface", "channel", "port")
+                   if getattr(args, f"can_{k}") is not None})
+    planner = planner_mode(args.planner, args.config)
+    bag = None if args.no_bag else (Path(args.bag) if args.bag else run_folder(scenario.name, planner) / "bag")
+    try:
+        summary = launch(scenario, params, graph=args.graph, planner=planner, seed=args.seed, params_file=args.config,
+                         rate=args.rate, bag=bag)
+    except BagError as exc:
+        raise ParamError(str(exc)) from None
+    print(format_summary(summary))
+    print(f"node exits      {summary['node_exits']}")
+    if bag is not None:
+        print(f"bag             {bag}")
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    return 0

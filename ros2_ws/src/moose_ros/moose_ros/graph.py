@@ -1,0 +1,181 @@
+"""The graph contract: every topic, every node, the launch graphs and the defaults they share.
+
+One definition of each fact of the node graph (paper Fig. 3). Nodes publish and subscribe through
+:meth:`Topic.publisher` and :meth:`Topic.subscription`; the launcher, the bag recorder and player,
+the ROS 2 launch files, ``setup.py``'s entry points and the topic table of docs/design.md are taken
+from here or checked against it by ``tests/test_graph_contract.py``.
+
+This module is light on purpose (no middleware, no planner): every node, the launcher and the
+command line import it.
+"""
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Callable, Optional
+
+from .runtime.names import CLOCK_TOPIC, CLOCK_TYPE
+from .runtime.qos import (
+    QOS_CLOCK, QOS_CLOCK_READER, QOS_DEFAULT, QOS_LATCHED, QOS_LATCHED_READER, QOS_SENSOR, Qos,
+)
+
+COMMAND_TIMEOUT = 0.05
+"""Actuator commands older than this (s) are stale: five 10 ms command cycles, the vehicle ECU's timeout.
+The one value of the command guard of the CAN bridge, the vehicle-ECU emulator and the simulator's
+topic input (which stands in for the same ECUs)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Node:
+    """A node of the graph: one ECU function (paper Fig. 3)."""
+
+    name: str
+    """Node and executable name (``moose node NAME``, ``ros2 run moose_ros NAME``)."""
+    group: str
+    """ECU group (one service of docker/compose.yaml, one ``group:=`` of the ROS 2 launch file)."""
+    implementation: str
+    """``module:Class`` under ``moose_ros.nodes`` (imported only when the node starts, so a node loads
+    only what its job needs)."""
+    job: str
+    """What it does, in one line."""
+
+
+NODES: dict[str, Node] = {n.name: n for n in (
+    Node("vehicle_simulator", "vehicle", "simulator:VehicleSimulator",
+         "plant, sensors and the scenario's obstacle; owns simulated time (/clock)"),
+    Node("observer", "perception", "observer:Observer", "state observer: vehicle sensors → state estimate"),
+    Node("obstacle_detector", "perception", "detector:Detector", "state + danger zones → threat (τ, w, ν)"),
+    Node("mpc_planner", "planning", "planner:MpcPlannerNode", "MPC planner at the planning rate and on a new obstacle"),
+    Node("msf_planner", "planning", "planner:MsfPlannerNode", "MSF planner at the planning rate and on a new obstacle"),
+    Node("weight_fbl", "planning", "weight_fbl:WeightFbl", "weight function and FBL: blend → references"),
+    Node("motion_controller", "control", "motion:Motion", "PI speed control, TDL, feedback EPS → actuator command"),
+    Node("can_bridge", "bridge", "can_bridge:CanBridge", "actuator command ↔ guarded CAN frames ↔ sensor topics"),
+)}
+"""Every node of the graph, in start order."""
+
+GROUPS: dict[str, tuple[str, ...]] = {
+    group: tuple(n.name for n in NODES.values() if n.group == group) for group in dict.fromkeys(
+        n.group for n in NODES.values())
+}
+"""Nodes by ECU group: perception, planning (the MicroLabBox), control (the AutoBox), vehicle, bridge."""
+
+GRAPHS: dict[str, tuple[str, ...]] = {
+    "full": ("vehicle_simulator", "observer", "obstacle_detector", "mpc_planner", "msf_planner", "weight_fbl",
+             "motion_controller"),
+    "car": ("observer", "obstacle_detector", "mpc_planner", "msf_planner", "weight_fbl", "motion_controller",
+            "can_bridge"),
+    "can": ("vehicle_simulator", "observer", "obstacle_detector", "mpc_planner", "msf_planner", "weight_fbl",
+            "motion_controller", "can_bridge"),
+}
+"""The graphs ``moose launch`` starts. ``full``: with the vehicle simulator on topics; ``car``: the graph that
+runs on the vehicle (sensors and actuators through the CAN bridge); ``can``: ``car`` plus the simulator as
+the vehicle-side ECU emulator behind the DBC, over ``udp_multicast`` here."""
+
+SENSOR_SOURCES = ("vehicle_simulator", "can_bridge")
+"""Who publishes the vehicle's sensor topics: the simulator on topics, or the CAN bridge from the bus."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Topic:
+    """A topic of the graph: name, message type, QoS, designed rate, who publishes and who subscribes."""
+
+    name: str
+    type: str
+    """``pkg/msg/Type``."""
+    qos: Qos
+    """What its publishers offer."""
+    rate: str
+    """Designed rate, as documented (``"100 Hz"``, ``"5 Hz + on a new obstacle"``)."""
+    rate_hz: Optional[float]
+    """Designed periodic rate (Hz); ``None`` for a topic published on events only."""
+    publishers: tuple[str, ...]
+    subscribers: tuple[str, ...]
+    """Nodes of the graph (tools such as the launcher's monitor and the recorder subscribe to every topic)."""
+    content: str = ""
+    """What it carries beyond the type name (frames, units), for the topic table."""
+    reader_qos: Optional[Qos] = None
+    """What its subscribers request, when that differs from :attr:`qos`."""
+
+    @property
+    def subscription_qos(self) -> Qos:
+        return self.reader_qos or self.qos
+
+    def publisher(self, rt: Any) -> Any:
+        """A publisher of this topic on runtime node ``rt``."""
+        return rt.publisher(self.type, self.name, self.qos)
+
+    def subscription(self, rt: Any, callback: Callable[[Any], None]) -> Any:
+        """A subscription to this topic on runtime node ``rt``, with the subscribers' QoS."""
+        return rt.subscription(self.type, self.name, callback, self.subscription_qos)
+
+
+_ALL = tuple(NODES)
+CLOCK = Topic(CLOCK_TOPIC, CLOCK_TYPE, QOS_CLOCK, "100 Hz", 100.0, ("vehicle_simulator",),
+              tuple(n for n in _ALL if n != "vehicle_simulator"), "simulated time (use_sim_time)",
+              reader_qos=QOS_CLOCK_READER)
+ODOM = Topic("/vehicle/odom", "nav_msgs/msg/Odometry", QOS_SENSOR, "100 Hz", 100.0, ("vehicle_simulator",), (),
+             "odom → base_link, ground truth")
+IMU = Topic("/vehicle/imu", "sensor_msgs/msg/Imu", QOS_SENSOR, "100 Hz", 100.0, SENSOR_SOURCES, ("observer",),
+            "base_link; a_x, a_y, γ")
+GPS = Topic("/vehicle/gps", "nav_msgs/msg/Odometry", QOS_DEFAULT, "1 Hz", 1.0, SENSOR_SOURCES, ("observer",),
+            "local fix, stamped at measurement, sent 0.2 s later")
+WHEEL_SPEEDS = Topic("/vehicle/wheel_speeds", "moose_msgs/msg/WheelSpeeds", QOS_SENSOR, "100 Hz", 100.0,
+                     SENSOR_SOURCES, ("observer",), "rear wheel speeds")
+STEERING = Topic("/vehicle/steering", "moose_msgs/msg/SteeringReport", QOS_SENSOR, "100 Hz", 100.0, SENSOR_SOURCES,
+                 ("observer", "motion_controller"), "EPS steering angle")
+OBSTACLES = Topic("/perception/obstacles", "moose_msgs/msg/ObstacleArray", QOS_LATCHED, "on appearance", None,
+                  ("vehicle_simulator",), ("obstacle_detector",), "danger zones seen by the perception sensor")
+STATE = Topic("/perception/state", "moose_msgs/msg/StateEstimate", QOS_DEFAULT, "100 Hz", 100.0, ("observer",),
+              ("obstacle_detector", "mpc_planner", "msf_planner", "weight_fbl", "motion_controller"),
+              "x, y, θ, v_x, v_y, γ, δ")
+THREAT = Topic("/perception/threat", "moose_msgs/msg/Threat", QOS_DEFAULT, "100 Hz", 100.0, ("obstacle_detector",),
+               ("mpc_planner", "msf_planner", "weight_fbl"), "τ, w, ν, side")
+PLAN_MPC = Topic("/planning/mpc", "moose_msgs/msg/PlannerOutput", QOS_DEFAULT, "5 Hz + on a new obstacle", 5.0,
+                 ("mpc_planner",), ("weight_fbl",), "planned accelerations, status")
+PLAN_MSF = Topic("/planning/msf", "moose_msgs/msg/PlannerOutput", QOS_DEFAULT, "5 Hz + on a new obstacle", 5.0,
+                 ("msf_planner",), ("weight_fbl",), "planned accelerations, status")
+BLEND = Topic("/planning/blend", "moose_msgs/msg/Blend", QOS_DEFAULT, "5 Hz", 5.0, ("weight_fbl",),
+              ("mpc_planner",), "w_MPC and the blended plan: the MPC's next initial guess")
+REFERENCE = Topic("/control/reference", "moose_msgs/msg/Reference", QOS_DEFAULT,
+                  "100 Hz (δ* re-evaluated per estimate)", 100.0, ("weight_fbl",), ("motion_controller",), "δ*, v_x*")
+ACTUATOR_COMMAND = Topic("/control/actuator_command", "moose_msgs/msg/ActuatorCommand", QOS_DEFAULT,
+                         "100 Hz (per estimate)", 100.0, ("motion_controller",), ("vehicle_simulator", "can_bridge"),
+                         "δ*, δ̇_cmd, T_rl, T_rr")
+DIAGNOSTICS = Topic("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", QOS_LATCHED, "1 Hz + on start", 1.0, _ALL,
+                    ("vehicle_simulator",), "each node's status; the simulator starts the clock when all reported",
+                    reader_qos=QOS_LATCHED_READER)
+
+TOPICS: dict[str, Topic] = {t.name: t for t in (
+    CLOCK, ODOM, IMU, GPS, WHEEL_SPEEDS, STEERING, OBSTACLES, STATE, THREAT, PLAN_MPC, PLAN_MSF, BLEND, REFERENCE,
+    ACTUATOR_COMMAND, DIAGNOSTICS,
+)}
+"""Every topic of the graph by name."""
+
+PLANS: dict[str, Topic] = {"mpc": PLAN_MPC, "msf": PLAN_MSF}
+"""The output topic of each planner."""
+
+
+def publishes(node: str) -> list[Topic]:
+    """The topics ``node`` publishes."""
+    return [t for t in TOPICS.values() if node in t.publishers]
+
+
+def subscribes(node: str) -> list[Topic]:
+    """The topics ``node`` subscribes to (``/clock`` through the runtime, with ``use_sim_time``)."""
+    return [t for t in TOPICS.values() if node in t.subscribers]
+
+
+def topic_table() -> str:
+    """The Markdown topic table of docs/design.md, "Node graph"."""
+
+    def qos(q: Qos) -> str:
+        parts = ["reliable" if q.reliable else "best effort"] + (["transient local"] if q.transient_local else [])
+        return ", ".join(parts + [f"keep last {q.depth}"])
+
+    rows = ["| topic | type | content | publishers → subscribers | rate | QoS (publishers; subscribers if other) |",
+            "|---|---|---|---|---|---|"]
+    for t in TOPICS.values():
+        subscribers = ", ".join(t.subscribers) or "tools (monitor, recorder)"
+        reader = f"; {qos(t.reader_qos)}" if t.reader_qos else ""
+        rows.append(f"| `{t.name}` | {t.type} | {t.content} | {', '.join(t.publishers)} → {subscribers} | {t.rate} "
+                    f"| {qos(t.qos)}{reader} |")
+    return "\n".join(rows)

@@ -1,0 +1,85 @@
+"""The node graph (paper Fig. 3): one node per ECU function, thin shells around the core's blocks.
+
+One module per node (``simulator``, ``observer``, ``detector``, ``planner``, ``weight_fbl``,
+``motion``, ``can_bridge``; :mod:`.base` holds what they share).  A node's module is imported only
+when that node starts (:data:`moose_ros.graph.NODES` names it), so each process loads only what its
+job needs: the CAN bridge and the motion controller never load CasADi or the planners.
+
+Run one with ``moose node NAME [--params FILE] [--param key=value ...]``, ``python -m
+moose_ros.nodes NAME …`` or, on ROS 2, ``ros2 run moose_ros NAME`` (the console script
+``NAME`` is ``moose_ros.nodes:NAME_main``).  Topics, rates and QoS: :mod:`moose_ros.graph`.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from typing import Any, Callable, Sequence
+
+from moose.params import ParamError
+
+from ..graph import NODES
+
+
+def node_class(name: str) -> Callable[[Any], Any]:
+    """The class of node ``name`` (imports its module)."""
+    if name not in NODES:
+        raise ParamError(f"node {name!r} is unknown; nodes: {', '.join(sorted(NODES))}")
+    module, cls = NODES[name].implementation.split(":")
+    return getattr(importlib.import_module(f"{__name__}.{module}"), cls)
+
+
+def parse_overrides(items: Sequence[str]) -> dict[str, Any]:
+    """``key=value`` pairs (values parsed as YAML) → parameter overrides."""
+    import yaml
+
+    out: dict[str, Any] = {}
+    for item in items:
+        if "=" not in item:
+            raise ParamError(f"--param {item!r} is invalid: expected key=value")
+        key, value = item.split("=", 1)
+        out[key.strip()] = yaml.safe_load(value)
+    return out
+
+
+def run(name: str, argv: Sequence[str] = ()) -> int:
+    """Start node ``name`` and spin it until shutdown; returns the exit status."""
+    from ..parameters import check_parameter_file
+    from ..runtime import create_node
+
+    parser = argparse.ArgumentParser(prog=f"moose node {name}")
+    parser.add_argument("--params", help="ROS 2 parameter file")
+    parser.add_argument("--param", action="append", default=[], help="parameter override key=value")
+    args, _ros_args = parser.parse_known_args(list(argv))
+    cls = node_class(name)
+    if args.params:
+        check_parameter_file(args.params)
+    rt = create_node(name, args.params, parse_overrides(args.param))
+    node = cls(rt)
+    node.publish_diagnostics()  # announce: the simulator starts the clock when every node has
+    rt.log_info(f"{name} started")
+    try:
+        rt.spin()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        node.message = "stopped"
+        rt.shutdown()
+    return 0
+
+
+def main(name: str, argv: Sequence[str]) -> None:
+    """Run node ``name`` as a program: exit status 0, or 2 with ``NAME: error: …`` for bad input."""
+    try:
+        sys.exit(run(name, argv))
+    except ParamError as exc:
+        print(f"{name}: error: {exc}", file=sys.stderr)
+        sys.exit(2)
+
+
+def __getattr__(attr: str) -> Callable[[], None]:
+    """``NAME_main``: the console script of node ``NAME`` (``setup.py``'s entry points)."""
+    name = attr[:-len("_main")] if attr.endswith("_main") else ""
+    if name in NODES:
+        return lambda: main(name, sys.argv[1:])
+    raise AttributeError(f"module {__name__!r} has no attribute {attr!r}")

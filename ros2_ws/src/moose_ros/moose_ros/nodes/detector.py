@@ -1,0 +1,28 @@
+"""``obstacle_detector``: state + visible danger zones → /perception/threat (τ, w, ν)."""
+from __future__ import annotations
+
+from typing import Any
+
+from moose.detector import ObstacleDetector
+
+from .. import convert as cv
+from ..graph import OBSTACLES, STATE, THREAT
+from .base import GraphNode
+
+
+class Detector(GraphNode):
+    """Obstacle detector: state + visible danger zones → /perception/threat."""
+
+    name = "obstacle_detector"
+
+    def __init__(self, rt: Any) -> None:
+        super().__init__(rt)
+        self.detector = ObstacleDetector(self.config.detector, self.table())
+        self.obstacles: list = []
+        self.pub = THREAT.publisher(rt)
+        OBSTACLES.subscription(rt, lambda m: setattr(self, "obstacles", [cv.obstacle_from_msg(o) for o in m.obstacles]))
+        STATE.subscription(rt, self.on_state)
+
+    def on_state(self, msg: Any) -> None:
+        estimate = cv.estimate_from_msg(msg)
+        self.pub(cv.threat_to_msg(self.rt, estimate.t, self.detector.update(estimate.t, estimate, self.obstacles)))

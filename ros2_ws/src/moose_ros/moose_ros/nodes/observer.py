@@ -1,0 +1,41 @@
+"""``observer``: the state observer — IMU, GPS, wheel speeds, EPS → /perception/state at the IMU rate."""
+from __future__ import annotations
+
+from typing import Any
+
+from moose.observer import StateObserver
+from moose.signals import StateEstimate
+from moose.vehicle import initial_state
+
+from .. import convert as cv
+from ..graph import GPS, IMU, STATE, STEERING, WHEEL_SPEEDS
+from .base import WARN, GraphNode
+
+
+class Observer(GraphNode):
+    """State observer: IMU, GPS, wheel speeds, EPS → /perception/state at the IMU rate."""
+
+    name = "observer"
+
+    def __init__(self, rt: Any) -> None:
+        super().__init__(rt)
+        scenario = self.params.load_scenario()
+        start = initial_state(self.config.vehicle, x=scenario.start_x, vx=scenario.v_init)
+        self.observer = StateObserver(self.config.observer, self.config.model_vehicle,
+                                      StateEstimate(0.0, start[0], 0.0, 0.0, scenario.v_init, 0.0, 0.0, 0.0))
+        self.pub = STATE.publisher(rt)
+        self.dropped = 0
+        IMU.subscription(rt, lambda m: self.feed(cv.imu_from_msg(m), True))
+        GPS.subscription(rt, lambda m: self.feed(cv.gps_from_msg(m, self.rt.now())))
+        WHEEL_SPEEDS.subscription(rt, lambda m: self.feed(cv.wheels_from_msg(m)))
+        STEERING.subscription(rt, lambda m: self.feed(cv.steering_from_msg(m)))
+
+    def feed(self, sample: Any, publish: bool = False) -> None:
+        try:
+            self.observer.update(sample)
+        except ValueError:
+            self.dropped += 1  # out of order (transport reordering): counted, never fatal
+            self.level, self.message, self.values = WARN, "out-of-order samples dropped", {"dropped": self.dropped}
+            return
+        if publish:
+            self.pub(cv.estimate_to_msg(self.rt, self.observer.estimate()))

@@ -1,0 +1,86 @@
+"""``mpc_planner`` and ``msf_planner``: a planner at the planning rate, and at once on a new obstacle."""
+from __future__ import annotations
+
+from typing import Any, Optional
+
+import numpy as np
+
+from moose.planning import new_obstacle
+from moose.signals import Blend, PlannerInput, StateEstimate, Threat
+from moose.weight import WeightFunction
+
+from .. import convert as cv
+from ..graph import BLEND, PLANS, STATE, THREAT
+from .base import OK, WARN, GraphNode
+
+
+class Planner(GraphNode):
+    """MPC or MSF planner at the planning rate (5 Hz), and at once on a new obstacle."""
+
+    kind = ""
+
+    def __init__(self, rt: Any) -> None:
+        super().__init__(rt)
+        self.planner = self.make_planner()
+        self.scenario = self.params.load_scenario()
+        self.estimate: Optional[StateEstimate] = None
+        self.threat: Optional[Threat] = None
+        self.detected = False
+        self.guess: Optional[np.ndarray] = None
+        self.pub = PLANS[self.kind].publisher(rt)
+        STATE.subscription(rt, lambda m: setattr(self, "estimate", cv.estimate_from_msg(m)))
+        THREAT.subscription(rt, self.on_threat)
+        rt.timer(1.0 / self.config.planning_rate_hz, self.plan)
+
+    def make_planner(self) -> Any:
+        raise NotImplementedError
+
+    def on_threat(self, msg: Any) -> None:
+        threat = cv.threat_from_msg(msg)
+        replan = new_obstacle(self.threat, threat)
+        self.threat = threat
+        self.detected = self.detected or threat is not None
+        if replan:
+            self.plan()
+
+    @property
+    def v_des(self) -> float:
+        """The ``v_des`` parameter, else the scenario's: the approach speed until detection, then its v_des."""
+        return self.params.v_des if self.params.v_des is not None else self.scenario.desired_speed(self.detected)
+
+    def plan(self) -> None:
+        if self.estimate is None:
+            return
+        t = self.rt.now()
+        inp = PlannerInput(t, self.estimate, self.threat, self.v_des, self.guess, y_lane=0.0)
+        result = self.planner.plan(inp)
+        self.values = {"status": result.status, "solve_ms": f"{result.solve_time_s * 1e3:.2f}"}
+        self.level = OK if result.status in ("converged", "capped", "ok", "idle") else WARN
+        self.pub(cv.plan_to_msg(self.rt, t, self.kind, result))
+
+
+class MpcPlannerNode(Planner):
+    """The MPC planner, warm-started from the last blend (/planning/blend)."""
+
+    name, kind = "mpc_planner", "mpc"
+
+    def __init__(self, rt: Any) -> None:
+        super().__init__(rt)
+        BLEND.subscription(rt, lambda m: setattr(
+            self, "guess", WeightFunction.next_initial_guess(Blend(m.weight_mpc, cv.blend_accel(m)))))
+
+    def make_planner(self) -> Any:
+        from moose.mpc import MpcPlanner
+
+        return MpcPlanner(self.config.mpc, self.config.grid)
+
+
+class MsfPlannerNode(Planner):
+    """The maximum-steering feed-forward planner (no initial guess)."""
+
+    name, kind = "msf_planner", "msf"
+
+    def make_planner(self) -> Any:
+        from moose.msf import MsfPlanner
+
+        return MsfPlanner(self.config.msf, self.config.grid, self.table())

@@ -1,0 +1,139 @@
+"""``vehicle_simulator``: plant, sensors and the scenario's obstacle; owns simulated time (/clock)."""
+from __future__ import annotations
+
+import math
+import time
+from typing import Any, Optional
+
+import numpy as np
+
+from moose.sensors import Sensors
+from moose.vehicle import VehiclePlant, initial_state
+
+from .. import convert as cv
+from ..graph import ACTUATOR_COMMAND, CLOCK, DIAGNOSTICS, OBSTACLES, ODOM
+from .base import WARN, GraphNode, sensor_publishers
+
+
+class TopicVehicleIo:
+    """The simulator's sensors and actuators as ROS topics."""
+
+    def __init__(self, node: "VehicleSimulator") -> None:
+        rt = node.rt
+        self.node = node
+        self.timeout = node.params.command_timeout
+        self.u = np.zeros(3)
+        self.last_command = -math.inf
+        self.pub = sensor_publishers(rt)
+        ACTUATOR_COMMAND.subscription(rt, self.on_command)
+
+    def on_command(self, msg: Any) -> None:
+        u = np.array([msg.steering_rate, msg.torque_rl, msg.torque_rr], dtype=float)
+        self.u = u if np.all(np.isfinite(u)) else np.zeros(3)
+        self.last_command = self.node.t
+
+    def send(self, sample: Any, t: float) -> None:
+        publish, convert = self.pub[type(sample)]
+        publish(convert(self.node.rt, sample))
+
+    def close(self) -> None:
+        """Nothing to release: topics go with the node."""
+
+    def command(self, t: float) -> np.ndarray:
+        if t - self.last_command <= self.timeout:
+            return self.u
+        if t > 1.0:
+            self.node.level, self.node.message = WARN, "actuator command timeout: zero torque, steering held"
+        return np.zeros(3)
+
+
+class CanVehicleIo:
+    """The vehicle-side ECUs: sensors as frames of config/kanon.dbc, commands from the bus (ECU emulator)."""
+
+    def __init__(self, node: "VehicleSimulator") -> None:
+        from moose.canbus.ecu import VehicleEcu
+
+        self.bus = node.params.open_bus(node.name)
+        self.ecu = VehicleEcu(timeout=node.params.command_timeout)
+
+    def send(self, sample: Any, t: float) -> None:
+        for frame in self.ecu.encode(sample, t):
+            self.bus.send(frame)
+
+    def close(self) -> None:
+        self.bus.shutdown()
+
+    def command(self, t: float) -> np.ndarray:
+        while (frame := self.bus.recv(timeout=0.0)) is not None:
+            self.ecu.on_frame(frame, t)
+        return self.ecu.plant_input(t)
+
+
+class VehicleSimulator(GraphNode):
+    """Plant, sensors and the scenario's obstacle; owns simulated time (/clock).
+
+    ``vehicle_bus`` chooses how sensors and actuators are reached: ``topics`` (the
+    simulator publishes the sensor topics itself) or ``can`` (it is the vehicle-side ECU
+    emulator behind config/kanon.dbc, and the ``can_bridge`` node makes the topics).
+    """
+
+    name = "vehicle_simulator"
+
+    def __init__(self, rt: Any) -> None:
+        super().__init__(rt)
+        self.scenario = self.params.load_scenario()
+        vehicle = self.config.vehicle  # the road's μ: the scenario's (GraphNode)
+        self.plant = VehiclePlant(vehicle, dt=self.config.simulation.plant_dt)
+        self.plant.reset(initial_state(vehicle, x=self.scenario.start_x, vx=self.scenario.v_init))
+        self.sensors = Sensors(self.config.sensors, vehicle, np.random.default_rng(self.params.seed))
+        self.dt = 1.0 / self.config.simulation.motion_rate_hz
+        self.steps = self.config.simulation.plant_steps_per_motion
+        self.end = self.scenario.lead_time + self.scenario.duration
+        self.t = 0.0
+        self.appeared = False
+        self.finished = False
+        self.pub = {"clock": CLOCK.publisher(rt), "odom": ODOM.publisher(rt), "obstacles": OBSTACLES.publisher(rt)}
+        self.io = CanVehicleIo(self) if self.params.vehicle_bus == "can" else TopicVehicleIo(self)
+        # simulated time starts once every node named in ``wait_for`` has reported (startup of the graph)
+        self.waiting = set(self.params.wait_for)
+        self.startup_deadline = self.params.startup_timeout
+        self.wall_start: Optional[float] = None
+        DIAGNOSTICS.subscription(rt, self.on_diagnostics)
+        # wall-clock pacing: one motion step every dt / rate seconds; simulated time is published on /clock
+        rt.timer(self.dt / self.params.rate, self.step)
+
+    def on_diagnostics(self, msg: Any) -> None:
+        for status in msg.status:
+            self.waiting.discard(status.name)
+
+    def step(self) -> None:
+        if self.finished:
+            return
+        if self.waiting:
+            self.wall_start = self.wall_start or time.monotonic()
+            if time.monotonic() - self.wall_start < self.startup_deadline:
+                return
+            self.rt.log_warn(f"starting without {sorted(self.waiting)}: not up after {self.startup_deadline} s")
+            self.waiting.clear()
+        rt, t = self.rt, self.t
+        clock = rt.make(CLOCK.type)
+        clock.clock.sec, clock.clock.nanosec = int(math.floor(t)), int(round((t - math.floor(t)) * 1e9)) % 1_000_000_000
+        self.pub["clock"](clock)
+        state = self.plant.state
+        u = self.io.command(t)
+        for sample in self.sensors.sample(t, state, self.plant.imu_specific_force(state, u)):
+            self.io.send(sample, t)
+        self.pub["odom"](cv.odometry_to_msg(rt, t, state))
+        if not self.appeared and self.scenario.appears(float(state[0]), float(state[3])):
+            self.appeared = True
+            self.pub["obstacles"](cv.obstacles_to_msg(rt, t, [self.scenario.danger_zone]))
+        self.values = {"t": f"{t:.2f}", "x": f"{state[0]:.2f}", "y": f"{state[1]:.2f}"}
+        if t >= self.end - 1e-9:
+            self.finished = True
+            self.message = "finished"
+            self.publish_diagnostics()
+            self.io.close()
+            rt.shutdown()
+            return
+        self.plant.step(u, self.steps)
+        self.t = round(t + self.dt, 9)

@@ -1,0 +1,76 @@
+"""``weight_fbl``: the weight function and the FBL — blends the plans of one planning instant, emits the references.
+
+The mode switch, the blend, the FBL reference and the next initial guess are the core's planning
+step (:class:`moose.planning.PlanningStep`), the code the lockstep loop runs.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Optional
+
+from moose.planning import PlanningStep
+from moose.signals import StateEstimate, Threat
+
+from .. import convert as cv
+from ..graph import BLEND, PLAN_MPC, PLAN_MSF, REFERENCE, STATE, THREAT
+from .base import OK, WARN, GraphNode
+
+
+class WeightFbl(GraphNode):
+    """Weight function and FBL: combines the plans of one planning instant through the core's planning
+    step (:class:`moose.planning.PlanningStep`, as the lockstep loop does) and emits the references."""
+
+    name = "weight_fbl"
+
+    def __init__(self, rt: Any) -> None:
+        super().__init__(rt)
+        self.step = PlanningStep(self.config, planners=False)
+        self.mode = self.step.mode
+        self.mpc_timeout = self.params.mpc_timeout
+        self.estimate: Optional[StateEstimate] = None
+        self.threat: Optional[Threat] = None
+        self.pending: dict[str, tuple[float, Any]] = {}
+        self.last_mpc = -math.inf
+        self.pub_blend = BLEND.publisher(rt)
+        self.pub_ref = REFERENCE.publisher(rt)
+        STATE.subscription(rt, self.on_state)
+        THREAT.subscription(rt, lambda m: setattr(self, "threat", cv.threat_from_msg(m)))
+        PLAN_MPC.subscription(rt, lambda m: self.on_plan("mpc", m))
+        PLAN_MSF.subscription(rt, lambda m: self.on_plan("msf", m))
+
+    def on_plan(self, kind: str, msg: Any) -> None:
+        self.pending[kind] = (cv.time_of(msg), cv.plan_from_msg(msg))
+        if kind == "mpc":
+            self.last_mpc = self.rt.now()
+        self.try_blend()
+
+    def try_blend(self) -> None:
+        """Combine when the mode's plans of one instant are here (or the MPC stayed silent past its deadline)."""
+        if self.estimate is None:
+            return
+        mpc, msf = self.pending.get("mpc"), self.pending.get("msf")
+        silent = False
+        if self.mode == "mpc" and mpc:
+            t, plans = mpc[0], (mpc[1], None)
+        elif self.mode == "msf" and msf:
+            t, plans = msf[0], (None, msf[1])
+        elif self.mode == "combined" and msf and mpc and abs(mpc[0] - msf[0]) < 1e-6:
+            t, plans = msf[0], (mpc[1], msf[1])
+        elif self.mode == "combined" and msf and self.rt.now() - self.last_mpc > self.mpc_timeout + 0.2:
+            t, plans, silent = msf[0], (None, msf[1]), True  # the MPC is silent: weight 0, and say so
+        else:
+            return
+        record = self.step.combine(t, self.estimate, self.threat, *plans)
+        self.level, self.message = (WARN, "mpc_planner silent: MSF only") if silent else (OK, "running")
+        self.pending.clear()
+        self.values = {"weight_mpc": f"{record.blend.weight_mpc:.3f}"}
+        self.pub_blend(cv.blend_to_msg(self.rt, t, record.blend, record.reference))
+        self.pub_ref(cv.reference_to_msg(self.rt, t, record.reference))
+
+    def on_state(self, msg: Any) -> None:
+        self.estimate = cv.estimate_from_msg(msg)
+        if "msf" in self.pending and self.mode == "combined":
+            self.try_blend()
+        reference = self.step.reference_between(self.estimate)
+        if reference is not None and self.config.simulation.steering_fbl_at_motion_rate:
+            self.pub_ref(cv.reference_to_msg(self.rt, self.estimate.t, reference))

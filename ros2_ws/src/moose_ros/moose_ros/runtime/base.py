@@ -1,0 +1,225 @@
+"""The node base class both backends share: name, namespace, parameters, logging, spin/shutdown life cycle."""
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import math
+import sys
+import threading
+import time
+from typing import Any, Callable, Optional
+
+from moose.params import ParamError, check, read_ros_params
+
+from .names import check_node_name, normalise_namespace, resolve_topic
+from .qos import Qos
+
+
+def flatten_params(params: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested parameter groups as ``{"group.name": value}``."""
+    out: dict[str, Any] = {}
+    for key, value in params.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            out.update(flatten_params(value, name + "."))
+        else:
+            out[name] = value
+    return out
+
+
+def set_dotted(params: dict[str, Any], name: str, value: Any) -> None:
+    """Set parameter ``name`` (dotted for nested groups) in ``params``, creating the groups on the way."""
+    target = params
+    *groups, leaf = name.split(".")
+    for group in groups:
+        target = target.setdefault(group, {})
+    target[leaf] = value
+
+
+def check_period(period: Any) -> float:
+    """A timer period in seconds: a finite positive number, else :class:`ParamError`."""
+    check("timer.period", period, lambda p: isinstance(p, (int, float)) and math.isfinite(p) and p > 0,
+          "a positive number of seconds")
+    return float(period)
+
+
+def typed_value(name: str, value: Any, default: Any) -> Any:
+    """``value`` checked against the type of ``default`` (ints pass as floats), as rclpy's declare does."""
+    if default is None or value is None:
+        return value
+    if isinstance(default, bool):
+        ok = isinstance(value, bool)
+    elif isinstance(default, float):
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+        value = float(value) if ok else value
+    elif isinstance(default, int):
+        ok = isinstance(value, int) and not isinstance(value, bool)
+    elif isinstance(default, str):
+        ok = isinstance(value, str)
+    elif isinstance(default, (list, tuple)):
+        ok = isinstance(value, (list, tuple))
+    else:
+        ok = True
+    if not ok:
+        raise ParamError(f"{name} = {value!r} is invalid: expected {type(default).__name__} like the default {default!r}")
+    return value
+
+
+@dataclasses.dataclass(frozen=True)
+class Endpoint:
+    """A publisher or subscription a node created."""
+
+    kind: str
+    """``publisher`` or ``subscription``."""
+    topic: str
+    """Fully qualified topic name."""
+    type: str
+    qos: Qos
+
+
+class Handle:
+    """A subscription or timer; ``cancel()`` stops it."""
+
+    def __init__(self, cancel: Callable[[], None]) -> None:
+        self._cancel = cancel
+
+    def cancel(self) -> None:
+        self._cancel()
+
+
+class Publisher:
+    """Publishes messages of one type on one topic: ``pub(msg)`` or ``pub.publish(msg)``."""
+
+    def __init__(self, topic: str, type_name: str, publish: Callable[[Any], None],
+                 count: Callable[[], int]) -> None:
+        self.topic, self.type_name = topic, type_name
+        self._publish, self._count = publish, count
+
+    def __call__(self, msg: Any) -> None:
+        self._publish(msg)
+
+    def publish(self, msg: Any) -> None:
+        self._publish(msg)
+
+    def subscription_count(self) -> int:
+        """Number of matched subscriptions (remote and local)."""
+        return self._count()
+
+
+class NodeBase:
+    """Parameters, logging and the spin/shutdown life cycle shared by both backends."""
+
+    def __init__(self, name: str, params_file: Optional[str], overrides: dict[str, Any],
+                 namespace: Optional[str]) -> None:
+        check_node_name(name)
+        self.name = name
+        self.namespace = normalise_namespace(namespace)
+        self._params: dict[str, Any] = read_ros_params(params_file, name) if params_file else {}
+        for key, value in overrides.items():
+            set_dotted(self._params, key, value)
+        self.use_sim_time = self._sim_time_flag(self._params.get("use_sim_time", False))
+        self._endpoints: list[Endpoint] = []
+        self._stop = threading.Event()
+        self._closed = False
+        self._spinning = False
+
+    # -- life cycle ----------------------------------------------------------------
+
+    @contextlib.contextmanager
+    def _running(self) -> Any:
+        """Mark the node as spinning; release it on the way out if ``shutdown`` was asked meanwhile."""
+        self._spinning = True
+        try:
+            yield
+        finally:
+            self._spinning = False
+        if self._stop.is_set():
+            self._close()
+
+    def shutdown(self) -> None:
+        """Stop spinning (also from a callback or another thread) and release the node's entities."""
+        self._stop.set()
+        if not self._closed:
+            self._wake()
+        if not self._spinning:
+            self._close()
+
+    def _close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        self._release()
+
+    def _wake(self) -> None:
+        """Interrupt a blocking wait of the executor (backends that wait without a timeout)."""
+
+    def _release(self) -> None:
+        raise NotImplementedError
+
+    @staticmethod
+    def _sim_time_flag(value: Any) -> bool:
+        if not isinstance(value, bool):
+            raise ParamError(f"use_sim_time = {value!r} is invalid: expected true or false")
+        return value
+
+    @property
+    def full_name(self) -> str:
+        return self.namespace.rstrip("/") + "/" + self.name
+
+    def resolve(self, topic: str) -> str:
+        """The fully qualified name of ``topic`` for this node."""
+        return resolve_topic(topic, self.namespace, self.name)
+
+    # -- parameters ----------------------------------------------------------------
+    def param(self, name: str, default: Any = None) -> Any:
+        """Parameter ``name`` (dotted for nested groups), or ``default``."""
+        value: Any = self._params
+        for part in name.split("."):
+            if not isinstance(value, dict) or part not in value:
+                return default
+            value = value[part]
+        return value
+
+    def declare_parameter(self, name: str, default: Any = None) -> Any:
+        """Declare ``name`` with ``default``; returns the file/override value (type-checked against the
+        default: a mismatch is a :class:`ParamError` naming the node, parameter and value) or the default."""
+        value = typed_value(f"{self.name}.{name}", self.param(name, default), default)
+        set_dotted(self._params, name, value)
+        return value
+
+    def get_parameter(self, name: str) -> Any:
+        """Value of a declared (or file-given) parameter; :class:`ParamError` if there is none."""
+        missing = object()
+        value = self.param(name, missing)
+        if value is missing:
+            raise ParamError(f"{self.name}.{name} is not set: declare it or give it in the parameter file")
+        return value
+
+    @property
+    def parameters(self) -> dict[str, Any]:
+        return self._params
+
+    # -- introspection ---------------------------------------------------------------
+    def endpoints(self) -> list[Endpoint]:
+        """The publishers and subscriptions this node created (the runtime's ``/clock`` reader included)."""
+        return list(self._endpoints)
+
+    def _track(self, kind: str, topic: str, type_name: str, qos: Qos) -> None:
+        self._endpoints.append(Endpoint(kind, topic, type_name, qos))
+
+    # -- logging ---------------------------------------------------------------------
+    def _log(self, level: str, text: str) -> None:
+        line = f"[{level}] [{time.time():.6f}] [{self.name}]: {text}\n"
+        stream = sys.stdout if level == "INFO" else sys.stderr
+        stream.write(line)
+        stream.flush()
+
+    def log_info(self, text: str) -> None:
+        self._log("INFO", text)
+
+    def log_warn(self, text: str) -> None:
+        self._log("WARN", text)
+
+    def log_error(self, text: str) -> None:
+        self._log("ERROR", text)
+

@@ -1,0 +1,361 @@
+"""The Cyclone DDS backend: a node with rmw_cyclonedds' wire conventions and a single-threaded executor.
+
+The ROS topic ``/ns/x`` is the DDS topic ``rt/ns/x``, type names are ``pkg::msg::dds_::Type_``, data
+is XCDR1 little-endian CDR, the domain comes from ``ROS_DOMAIN_ID`` (default 0) and QoS profiles map
+one to one (:class:`~moose_ros.runtime.qos.Qos`).  The executor is a single thread, like rclpy's
+SingleThreadedExecutor: ``spin`` blocks on a DDS WaitSet (readers, a guard condition for shutdown)
+with a timeout up to the next timer, takes what the readers hold and runs the callbacks in
+publication order (source timestamps), then the timers that are due.  Samples stay in the DDS
+reader history until the executor takes them, so keep-last depths act as in ROS 2 (a slow callback
+sees the newest samples, not a backlog).  With ``use_sim_time`` the clock follows ``/clock`` and
+timers fire on simulated time.
+
+Discovery is watched: a remote endpoint on one of our topics with another type, or with QoS that
+cannot match ours (best effort offered to a reliable reader, volatile to a transient-local one),
+is reported once with ``log_error``: such endpoints never exchange data.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import time
+from typing import Any, Callable, Optional
+
+from moose.params import ParamError
+
+from .base import Handle, NodeBase, Publisher, check_period
+from .names import CLOCK_TOPIC, CLOCK_TYPE, dds_topic_name
+from .qos import QOS_CLOCK_READER, QOS_DEFAULT, Qos
+
+
+class _Timer:
+    """A timer of the DDS executor: ``callback`` every ``period`` s of the node's timer clock."""
+
+    def __init__(self, period: float, callback: Callable[[], None], start: float) -> None:
+        self.period, self.callback, self.next = check_period(period), callback, start + check_period(period)
+        self.cancelled = False
+
+    def due(self, now: float) -> bool:
+        """True (and the next deadline set) when the timer fires at ``now``; missed periods are skipped
+        on the original grid, as rcl timers do."""
+        if self.cancelled or now + 1e-9 < self.next:
+            return False
+        self.next += self.period * (max(0, math.floor((now - self.next) / self.period + 1e-9)) + 1)
+        return True
+
+
+@dataclasses.dataclass
+class _Reader:
+    reader: Any
+    callback: Callable[[Any], None]
+    cls: type
+    condition: Any
+    depth: int
+    active: bool = True
+
+
+class DdsNode(NodeBase):
+    """A node on Cyclone DDS with ROS 2 wire conventions (see the module docstring)."""
+
+    def __init__(self, name: str, params_file: Optional[str] = None, overrides: Optional[dict[str, Any]] = None,
+                 namespace: Optional[str] = None) -> None:
+        from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication, BuiltinTopicDcpsSubscription
+        from cyclonedds.core import GuardCondition, InstanceState, ReadCondition, SampleState, ViewState, WaitSet
+        from cyclonedds.domain import DomainParticipant
+
+        super().__init__(name, params_file, overrides or {}, namespace)
+        raw = os.environ.get("ROS_DOMAIN_ID", "").strip() or "0"
+        if not raw.isdigit() or int(raw) > 232:
+            raise ParamError(f"ROS_DOMAIN_ID = {raw!r} is invalid: expected an integer 0..232")
+        self.domain_id = int(raw)
+        self.participant = DomainParticipant(self.domain_id)
+        self._waitset = WaitSet(self.participant)
+        self._guard = GuardCondition(self.participant)
+        self._waitset.attach(self._guard)
+        self._topics: dict[str, Any] = {}        # DDS topic name → Topic
+        self._local: dict[str, tuple[str, list[tuple[str, Qos]]]] = {}  # DDS topic → (type, [(kind, qos)])
+        self._readers: list[_Reader] = []
+        self._writers: list[Any] = []
+        self._timers: list[_Timer] = []
+        self._reported: set[tuple[str, str, str]] = set()
+        self._sim_now: Optional[float] = None
+        self._discovery = []
+        for kind, topic in (("publisher", BuiltinTopicDcpsPublication), ("subscription", BuiltinTopicDcpsSubscription)):
+            reader = BuiltinDataReader(self.participant, topic)
+            fresh = ReadCondition(reader, SampleState.NotRead | ViewState.Any | InstanceState.Alive)
+            alive = ReadCondition(reader, SampleState.Any | ViewState.Any | InstanceState.Alive)
+            self._waitset.attach(fresh)
+            self._discovery.append((kind, reader, fresh, alive))
+        if self.use_sim_time:
+            self.subscription(CLOCK_TYPE, CLOCK_TOPIC, self._on_clock, QOS_CLOCK_READER)
+
+    # -- entities ------------------------------------------------------------------
+    def _topic(self, type_name: str, topic: str, kind: str, qos: Qos) -> tuple[Any, type, str]:
+        from cyclonedds.topic import Topic
+
+        from ..interfaces import message_class
+
+        full = self.resolve(topic)
+        dds_name = dds_topic_name(full)
+        cls = message_class(type_name)
+        known = self._topics.get(dds_name)
+        if known is not None and known.data_type is not cls:
+            raise TypeError(f"topic {full!r} is already used with type {known.data_type.ros_type!r}, not {type_name!r}")
+        if known is None:
+            known = self._topics[dds_name] = Topic(self.participant, dds_name, cls)
+            self._local[dds_name] = (cls.__idl_typename__, [])
+        self._local[dds_name][1].append((kind, qos))
+        self._check_discovered()
+        return known, cls, full
+
+    @staticmethod
+    def _qos(profile: Qos, writer: bool) -> Any:
+        from cyclonedds.core import Policy, Qos as DdsQos
+        from cyclonedds.util import duration
+
+        policies = [
+            Policy.Reliability.Reliable(duration(milliseconds=100)) if profile.reliable else Policy.Reliability.BestEffort,
+            Policy.History.KeepLast(profile.depth),
+            Policy.Durability.TransientLocal if profile.transient_local else Policy.Durability.Volatile,
+        ]
+        if writer:  # as rmw_cyclonedds: XCDR1, no dispose when a writer goes away
+            policies += [Policy.DataRepresentation(use_cdrv0_representation=True),
+                         Policy.WriterDataLifecycle(autodispose=False)]
+        return DdsQos(*policies)
+
+    def publisher(self, type_name: str, topic: str, qos: Qos = QOS_DEFAULT) -> Publisher:
+        from cyclonedds.pub import DataWriter
+
+        from ..interfaces import normalise
+
+        dds_topic, cls, full = self._topic(type_name, topic, "publisher", qos)
+        writer = DataWriter(self.participant, dds_topic, qos=self._qos(qos, writer=True))
+        self._writers.append(writer)
+
+        def publish(msg: Any) -> None:
+            if type(msg) is not cls:
+                raise TypeError(f"publishing {type(msg).__name__} on {full!r}, which carries {type_name!r}")
+            try:
+                writer.write(msg)
+            except Exception:  # noqa: BLE001 - numpy values or tuples: retry with plain Python values
+                try:
+                    writer.write(normalise(msg))
+                except Exception as exc:  # noqa: BLE001 - the serialiser raises bare Exception
+                    cause = exc.__cause__ or exc
+                    raise TypeError(f"cannot publish {type_name} on {full!r}: {exc} ({cause})") from None
+
+        self._track("publisher", full, type_name, qos)
+        return Publisher(full, type_name, publish, lambda: len(writer.get_matched_subscriptions()))
+
+    def subscription(self, type_name: str, topic: str, callback: Callable[[Any], None],
+                     qos: Qos = QOS_DEFAULT) -> Handle:
+        from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState
+        from cyclonedds.sub import DataReader
+
+        dds_topic, cls, full = self._topic(type_name, topic, "subscription", qos)
+        reader = DataReader(self.participant, dds_topic, qos=self._qos(qos, writer=False))
+        condition = ReadCondition(reader, SampleState.Any | ViewState.Any | InstanceState.Any)
+        entry = _Reader(reader, callback, cls, condition, qos.depth)
+        self._readers.append(entry)
+        self._waitset.attach(condition)
+        self._track("subscription", full, type_name, qos)
+
+        def cancel() -> None:
+            if entry.active:
+                entry.active = False
+                self._waitset.detach(condition)
+
+        return Handle(cancel)
+
+    def timer(self, period: float, callback: Callable[[], None]) -> Handle:
+        timer = _Timer(period, callback, self._timer_now())
+        self._timers.append(timer)
+        self._guard.set(True)  # re-plan the executor's wait
+
+        def cancel() -> None:
+            timer.cancelled = True
+
+        return Handle(cancel)
+
+    # -- discovery checks ----------------------------------------------------------
+    def _check_discovered(self, fresh: bool = False) -> list[tuple[str, Any]]:
+        """Report remote endpoints on our topics whose type or QoS cannot match ours; returns the
+        endpoints read, (kind, DcpsEndpoint), all alive ones unless ``fresh`` (only the new ones)."""
+        from cyclonedds.builtin import DcpsEndpoint
+
+        own = str(self.participant.guid)
+        seen: list[tuple[str, Any]] = []
+        for kind, reader, new, alive in self._discovery:
+            for ep in reader.read(N=4096, condition=new if fresh else alive):
+                if not isinstance(ep, DcpsEndpoint):
+                    continue
+                seen.append((kind, ep))
+                local = self._local.get(ep.topic_name)
+                if local is not None and str(ep.participant_key) != own:
+                    self._compare(ep, kind, local)
+        return seen
+
+    def count_publishers(self, topic: str) -> int:
+        """Publishers on ``topic`` in the graph (this node's included), as rclpy's ``Node.count_publishers``."""
+        name = dds_topic_name(self.resolve(topic))
+        return sum(1 for kind, ep in self._check_discovered() if kind == "publisher" and ep.topic_name == name)
+
+    def count_subscribers(self, topic: str) -> int:
+        """Subscriptions on ``topic`` in the graph (this node's included)."""
+        name = dds_topic_name(self.resolve(topic))
+        return sum(1 for kind, ep in self._check_discovered() if kind == "subscription" and ep.topic_name == name)
+
+    def _compare(self, ep: Any, kind: str, local: tuple[str, list[tuple[str, Qos]]]) -> None:
+        from ..interfaces import ros_type_name
+
+        type_name, endpoints = local
+        topic = ep.topic_name[2:] if ep.topic_name.startswith("rt/") else ep.topic_name
+        if all(own_kind == kind for own_kind, _qos in endpoints):
+            return  # publishers do not talk to publishers, nor subscriptions to subscriptions
+        if ep.type_name != type_name:
+            self._report((topic, ep.type_name, ""),
+                         f"topic {topic!r}: a remote {kind} uses type {ros_type_name(ep.type_name)!r}, this node "
+                         f"{ros_type_name(type_name)!r}; they will not communicate")
+            return
+        reliable, transient = _endpoint_qos(ep.qos, kind)
+        for own_kind, qos in endpoints:
+            if own_kind == kind:
+                continue
+            if own_kind == "subscription":  # remote writer, our reader
+                if qos.reliable and not reliable:
+                    self._report((topic, kind, "reliability"), f"topic {topic!r}: a remote publisher offers best effort, "
+                                 "this subscription requests reliable; they will not communicate")
+                if qos.transient_local and not transient:
+                    self._report((topic, kind, "durability"), f"topic {topic!r}: a remote publisher offers volatile, "
+                                 "this subscription requests transient local; they will not communicate")
+            else:  # remote reader, our writer
+                if reliable and not qos.reliable:
+                    self._report((topic, kind, "reliability"), f"topic {topic!r}: a remote subscription requests "
+                                 "reliable, this publisher offers best effort; they will not communicate")
+                if transient and not qos.transient_local:
+                    self._report((topic, kind, "durability"), f"topic {topic!r}: a remote subscription requests "
+                                 "transient local, this publisher offers volatile; they will not communicate")
+
+    def _report(self, key: tuple[str, str, str], text: str) -> None:
+        if key not in self._reported:
+            self._reported.add(key)
+            self.log_error(text)
+
+    # -- time ------------------------------------------------------------------------
+    def _on_clock(self, msg: Any) -> None:
+        t = msg.clock.sec + 1e-9 * msg.clock.nanosec
+        if self._sim_now is not None and t < self._sim_now - 1e-9:
+            self.log_info(f"/clock jumped back from {self._sim_now:.3f} s to {t:.3f} s: timers restart")
+            for timer in self._timers:
+                timer.next = t + timer.period
+        self._sim_now = t
+
+    def now(self) -> float:
+        """ROS time (s): simulated time with ``use_sim_time`` (0 until the first ``/clock``), else wall time."""
+        if self.use_sim_time:
+            return self._sim_now if self._sim_now is not None else 0.0
+        return time.time()
+
+    def _timer_now(self) -> float:
+        """The timers' clock: simulated time, or the monotonic clock (immune to wall-clock steps)."""
+        return self.now() if self.use_sim_time else time.monotonic()
+
+    @staticmethod
+    def make(type_name: str, **fields: Any) -> Any:
+        from ..interfaces import make
+
+        return make(type_name, **fields)
+
+    # -- executor --------------------------------------------------------------------
+    def _wait_time(self, limit: float) -> float:
+        if self.use_sim_time:
+            return limit  # simulated-time timers fire when /clock arrives
+        pending = [t.next for t in self._timers if not t.cancelled]
+        if not pending:
+            return limit
+        return max(0.0, min(limit, min(pending) - time.monotonic()))
+
+    def _execute(self, wait: float) -> None:
+        """Wait up to ``wait`` s for data, a guard trigger or the next timer; run what is ready."""
+        from cyclonedds.util import duration
+
+        if wait > 0:
+            self._waitset.wait(duration(seconds=wait))
+        if self._guard.read():
+            self._guard.set(False)
+        for _kind, _reader, condition, _alive in self._discovery:
+            if condition.triggered:
+                self._check_discovered(fresh=True)
+                break
+        batch: list[tuple[int, int, Callable[[Any], None], Any]] = []
+        for index, entry in enumerate(list(self._readers)):
+            if not entry.active:
+                continue
+            for sample in entry.reader.take(N=max(entry.depth, 64)):
+                if isinstance(sample, entry.cls):  # skip dispose/unregister notifications
+                    info = getattr(sample, "sample_info", None)
+                    batch.append((getattr(info, "source_timestamp", 0), index, entry.callback, sample))
+        batch.sort(key=lambda item: (item[0], item[1]))  # publication order across topics
+        for _stamp, _index, callback, sample in batch:
+            if self._stop.is_set():
+                return
+            callback(sample)
+            self._fire_timers()
+        self._fire_timers()
+
+    def _fire_timers(self) -> None:
+        if self.use_sim_time and self._sim_now is None:
+            return
+        now = self._timer_now()
+        for timer in list(self._timers):
+            if timer.due(now) and not self._stop.is_set():
+                timer.callback()
+
+    def spin_once(self, timeout: float) -> None:
+        """Run callbacks and timers for ``timeout`` seconds (returns early on ``shutdown``)."""
+        deadline = time.monotonic() + timeout
+        with self._running():
+            while not self._stop.is_set():
+                remaining = deadline - time.monotonic()
+                self._execute(self._wait_time(max(remaining, 0.0)))
+                if remaining <= 0:
+                    break
+
+    def spin(self, until: Optional[Callable[[], bool]] = None) -> None:
+        """Run callbacks and timers until ``shutdown()`` or ``until()`` is true (checked at least every 0.1 s)."""
+        with self._running():
+            while not self._stop.is_set() and not (until and until()):
+                self._execute(self._wait_time(0.1))
+
+    def _wake(self) -> None:
+        self._guard.set(True)
+
+    def _release(self) -> None:
+        """Delete the DDS entities."""
+        participant = self.participant
+        # deleting the participant deletes its readers, writers, topics and waitset in Cyclone DDS
+        participant.__del__()
+        self._readers, self._writers, self._topics, self._discovery = [], [], {}, []
+
+
+def _endpoint_qos(qos: Any, kind: str) -> tuple[bool, bool]:
+    """(reliable, transient-local-or-stronger) of a discovered endpoint; DDS defaults when absent
+    (writers reliable, readers best effort; volatile)."""
+    from cyclonedds.core import Policy
+
+    reliable, transient = kind == "publisher", False
+    if qos is not None:
+        try:
+            rel = qos[Policy.Reliability]
+        except (KeyError, TypeError):
+            rel = None
+        if rel is not None:
+            reliable = "BestEffort" not in repr(rel)
+        try:
+            dur = qos[Policy.Durability]
+        except (KeyError, TypeError):
+            dur = None
+        if dur is not None:
+            transient = "Volatile" not in repr(dur)
+    return reliable, transient

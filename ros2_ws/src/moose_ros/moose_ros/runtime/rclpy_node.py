@@ -1,0 +1,159 @@
+"""The rclpy backend: the runtime's node API on a real ROS 2 node (generated message classes, rclpy's
+SingleThreadedExecutor, parameters visible to ``ros2 param``)."""
+from __future__ import annotations
+
+import time
+from typing import Any, Callable, Optional
+
+from moose.params import ParamError
+
+from .base import Handle, NodeBase, Publisher, check_period, flatten_params, set_dotted
+from .qos import QOS_DEFAULT, Qos
+
+
+class RclpyNode(NodeBase):
+    """The same API on rclpy (ROS 2 installed): generated message classes, its own single-threaded executor."""
+
+    def __init__(self, name: str, params_file: Optional[str] = None, overrides: Optional[dict[str, Any]] = None,
+                 namespace: Optional[str] = None) -> None:
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.node import Node
+        from rclpy.parameter import Parameter
+
+        super().__init__(name, params_file, overrides or {}, namespace)
+        self._rclpy = rclpy
+        self._owns_context = False
+        if not rclpy.ok():
+            rclpy.init(args=None)  # sys.argv: `ros2 run/launch` pass --ros-args (params files, remaps) there
+            self._owns_context = True
+        # our --params file and overrides become parameter overrides (they win over --ros-args ones),
+        # so use_sim_time reaches rclpy's TimeSource when the node is constructed
+        given = []
+        for key, value in flatten_params(self._params).items():
+            try:
+                given.append(Parameter(key, value=value))
+            except (TypeError, ValueError) as exc:
+                raise ParamError(f"{name}.{key} = {value!r} is invalid for ROS 2 parameters: {exc}") from None
+        self.node = Node(name, namespace=None if self.namespace == "/" else self.namespace, parameter_overrides=given,
+                         automatically_declare_parameters_from_overrides=True)
+        self._params = {}
+        for dotted, parameter in self.node.get_parameters_by_prefix("").items():
+            set_dotted(self._params, dotted, parameter.value)
+        self.use_sim_time = bool(self.node.get_parameter("use_sim_time").value)
+        self._executor = SingleThreadedExecutor()
+        self._executor.add_node(self.node)
+
+    @staticmethod
+    def _class(type_name: str) -> Any:
+        import importlib
+
+        from ..interfaces import UnknownMessageType, check_type_name
+
+        check_type_name(type_name)
+        pkg, kind, name = type_name.split("/")
+        try:
+            return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
+        except (ImportError, AttributeError):
+            raise UnknownMessageType(f"message type {type_name!r} is unknown (no generated class {pkg}.{kind}.{name}; "
+                                     "is the package built and sourced?)") from None
+
+    @staticmethod
+    def _qos(profile: Qos) -> Any:
+        from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+        return QoSProfile(
+            history=HistoryPolicy.KEEP_LAST, depth=profile.depth,
+            reliability=ReliabilityPolicy.RELIABLE if profile.reliable else ReliabilityPolicy.BEST_EFFORT,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL if profile.transient_local else DurabilityPolicy.VOLATILE,
+        )
+
+    def publisher(self, type_name: str, topic: str, qos: Qos = QOS_DEFAULT) -> Publisher:
+        cls = self._class(type_name)
+        full = self.resolve(topic)
+        pub = self.node.create_publisher(cls, full, self._qos(qos))
+
+        def publish(msg: Any) -> None:
+            if type(msg) is not cls:
+                raise TypeError(f"publishing {type(msg).__name__} on {full!r}, which carries {type_name!r}")
+            pub.publish(msg)
+
+        self._track("publisher", full, type_name, qos)
+        return Publisher(full, type_name, publish, pub.get_subscription_count)
+
+    def subscription(self, type_name: str, topic: str, callback: Callable[[Any], None],
+                     qos: Qos = QOS_DEFAULT) -> Handle:
+        full = self.resolve(topic)
+        sub = self.node.create_subscription(self._class(type_name), full, callback, self._qos(qos))
+        self._track("subscription", full, type_name, qos)
+        return Handle(lambda: self.node.destroy_subscription(sub))
+
+    def timer(self, period: float, callback: Callable[[], None]) -> Handle:
+        timer = self.node.create_timer(check_period(period), callback)  # on the node's clock: sim time honoured
+        return Handle(timer.cancel)
+
+    def declare_parameter(self, name: str, default: Any = None) -> Any:
+        value = super().declare_parameter(name, default)
+        if value is not None and not self.node.has_parameter(name):  # visible to `ros2 param`
+            try:
+                self.node.declare_parameter(name, value)
+            except Exception as exc:  # noqa: BLE001 - rclpy's parameter exceptions have no common base
+                raise ParamError(f"{self.name}.{name} = {value!r} cannot be declared: {exc}") from None
+        return value
+
+    def count_publishers(self, topic: str) -> int:
+        return self.node.count_publishers(self.resolve(topic))
+
+    def count_subscribers(self, topic: str) -> int:
+        return self.node.count_subscribers(self.resolve(topic))
+
+    def now(self) -> float:
+        return self.node.get_clock().now().nanoseconds * 1e-9
+
+    def make(self, type_name: str, **fields: Any) -> Any:
+        cls = self._class(type_name)
+        known = cls.get_fields_and_field_types()
+        unknown = sorted(set(fields) - set(known))
+        if unknown:
+            raise TypeError(f"{type_name} has no field {unknown[0]!r}; fields: {', '.join(known)}")
+        msg = cls()
+        for key, value in fields.items():
+            setattr(msg, key, value)
+        return msg
+
+    def log_info(self, text: str) -> None:
+        self.node.get_logger().info(text)
+
+    def log_warn(self, text: str) -> None:
+        self.node.get_logger().warning(text)
+
+    def log_error(self, text: str) -> None:
+        self.node.get_logger().error(text)
+
+    def spin_once(self, timeout: float) -> None:
+        """Run callbacks and timers for ``timeout`` seconds (returns early on ``shutdown``)."""
+        deadline = time.monotonic() + timeout
+        with self._running():
+            while not self._stop.is_set() and self._rclpy.ok():
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    break
+                self._executor.spin_once(timeout_sec=min(remaining, 0.1))
+
+    def spin(self, until: Optional[Callable[[], bool]] = None) -> None:
+        from rclpy.executors import ExternalShutdownException
+
+        with self._running():
+            try:
+                while self._rclpy.ok() and not self._stop.is_set() and not (until and until()):
+                    self._executor.spin_once(timeout_sec=0.1)
+            except ExternalShutdownException:
+                pass
+
+    def _release(self) -> None:
+        """Destroy the node and its executor (and the rclpy context if this node created it)."""
+        self._executor.remove_node(self.node)
+        self._executor.shutdown()
+        self.node.destroy_node()
+        if self._owns_context:
+            self._rclpy.try_shutdown()

@@ -1,0 +1,123 @@
+"""The graph contract (moose_ros.graph) is the one definition of the graph: the nodes create exactly its
+endpoints, and the launch files, setup.py's entry points, docker/compose.yaml and the docs agree with it."""
+from __future__ import annotations
+
+import ast
+import dataclasses
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from moose.canbus.bus import DEFAULT_GROUP
+from moose.canbus.ecu import VehicleEcu
+from moose.canbus.safety import GuardParams
+from moose_ros.graph import COMMAND_TIMEOUT, GRAPHS, GROUPS, NODES, TOPICS, publishes, subscribes, topic_table
+from moose_ros.nodes import node_class
+from moose_ros.parameters import NODE_PARAMETERS, node_parameters
+from moose_ros.runtime import DdsNode
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "ros2_ws" / "src" / "moose_ros"
+TOPIC_LITERAL = re.compile(r"""["'](/(?:clock|diagnostics|vehicle/\w+|perception/\w+|planning/\w+|control/\w+))["']""")
+
+
+def test_topic_names_are_written_once_in_the_package() -> None:
+    """Outside the contract (and the runtime's time source, /clock) no module names a topic of the graph."""
+    found: dict[str, list[str]] = {}
+    for path in sorted((PACKAGE / "moose_ros").rglob("*.py")):
+        for name in TOPIC_LITERAL.findall(path.read_text(encoding="utf-8")):
+            found.setdefault(name, []).append(str(path.relative_to(PACKAGE)))
+    assert found.pop("/clock") == ["moose_ros/runtime/names.py"]
+    assert found == {name: ["moose_ros/graph.py"] for name in TOPICS if name != "/clock"}
+
+
+def test_contract_is_consistent() -> None:
+    for topic in TOPICS.values():
+        assert set(topic.publishers) | set(topic.subscribers) <= set(NODES), topic.name
+        assert topic.publishers, topic.name
+    for graph, nodes in GRAPHS.items():
+        assert set(nodes) <= set(NODES), graph
+    assert [n for g in GROUPS.values() for n in g] == list(NODES)
+    assert set(NODE_PARAMETERS) == set(NODES)
+    for name in NODES:
+        assert node_class(name).name == name
+    # one command timeout for the bridge's guard, the ECU emulator and the simulator, equal to the core's defaults
+    assert COMMAND_TIMEOUT == GuardParams().timeout == VehicleEcu().timeout == 0.05
+    assert {cls().command_timeout for cls in NODE_PARAMETERS.values() if hasattr(cls(), "command_timeout")} == {0.05}
+
+
+def _node_endpoints(name: str, tmp_path: Path) -> set[tuple[str, str, str, object]]:
+    overrides = {"use_sim_time": name != "vehicle_simulator", "scenario": "paper_v5_tau3"}
+    if name == "can_bridge":
+        overrides = {"use_sim_time": True, "can_interface": "virtual", "can_channel": f"contract-{tmp_path.name}"}
+    if name in ("obstacle_detector", "weight_fbl", "motion_controller"):
+        overrides.pop("scenario")
+    rt = DdsNode(name, overrides=overrides)
+    try:
+        node = node_class(name)(rt)
+        if name == "can_bridge":
+            node.bus.shutdown()
+        return {(e.kind, e.topic, e.type, e.qos) for e in rt.endpoints()}
+    finally:
+        rt.shutdown()
+
+
+@pytest.mark.parametrize("name", list(NODES))
+def test_each_node_creates_exactly_the_endpoints_of_the_contract(name: str, tmp_path: Path) -> None:
+    expected = {("publisher", t.name, t.type, t.qos) for t in publishes(name)}
+    expected |= {("subscription", t.name, t.type, t.subscription_qos) for t in subscribes(name)}
+    assert _node_endpoints(name, tmp_path) == expected
+
+
+def test_setup_entry_points_launch_file_and_compose_follow_the_contract() -> None:
+    setup = (PACKAGE / "setup.py").read_text(encoding="utf-8")
+    assert ast.literal_eval(re.search(r"NODES = (\[.*?\])", setup, re.S).group(1)) == list(NODES)
+    launch_file = (PACKAGE / "launch" / "moose_graph.launch.py").read_text(encoding="utf-8")
+    assert "from moose_ros.graph import GROUPS, NODES" in launch_file and "parameter_names(name)" in launch_file
+    import yaml
+
+    compose = yaml.safe_load((ROOT / "docker" / "compose.yaml").read_text(encoding="utf-8"))
+    assert set(compose["services"]) == set(GROUPS)
+
+
+def test_docs_topic_table_is_the_contracts() -> None:
+    design = (ROOT / "docs" / "design.md").read_text(encoding="utf-8")
+    assert topic_table() in design, "regenerate with: python -c 'from moose_ros.graph import topic_table; print(topic_table())'"
+
+
+def test_can_defaults_have_one_definition() -> None:
+    """The multicast group and port are moose.canbus.bus's: no other module writes them."""
+    for path in [*sorted((PACKAGE / "moose_ros").rglob("*.py")), *sorted((ROOT / "src" / "moose" / "cli").glob("*.py"))]:
+        text = path.read_text(encoding="utf-8")
+        assert DEFAULT_GROUP not in text and "43113" not in text, path
+    for cls in NODE_PARAMETERS.values():
+        fields = {f.name: f.default for f in dataclasses.fields(cls)}
+        assert fields.get("can_channel") is None and fields.get("can_port") is None
+    assert node_parameters("can_bridge", {})[1].can_interface == "udp_multicast"
+
+
+LEAN = ("motion_controller", "can_bridge", "weight_fbl")
+HEAVY = ("casadi", "moose.mpc", "moose.msf", "moose.maneuver", "scipy")
+
+
+def _loaded_after(code: str) -> list[str]:
+    probe = code + f"\nimport sys\nprint(sorted(m for m in {HEAVY!r} if m in sys.modules))"
+    result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    return ast.literal_eval(result.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.parametrize("name", LEAN)
+def test_a_lean_node_module_imports_neither_casadi_nor_the_planners(name: str) -> None:
+    assert _loaded_after(f"from moose_ros.nodes import node_class\nnode_class({name!r})") == []
+
+
+@pytest.mark.parametrize("name", ["motion_controller", "can_bridge", "weight_fbl"])
+def test_a_running_lean_node_has_not_loaded_casadi(name: str) -> None:
+    overrides = {"can_interface": "virtual", "can_channel": "lean-probe"} if name == "can_bridge" else {}
+    code = (f"from moose_ros.nodes import node_class\nfrom moose_ros.runtime import DdsNode\n"
+            f"rt = DdsNode({name!r}, overrides={overrides!r})\nnode = node_class({name!r})(rt)\nrt.shutdown()")
+    assert _loaded_after(code) == []

@@ -1,0 +1,81 @@
+"""A normal install works: both packages built as wheels, installed into a fresh virtual environment (pip's cache
+reused), run from a directory outside the source tree.  The Dockerfile installs the same way."""
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.slow
+
+ROOT = Path(__file__).resolve().parents[1]
+SKIP = shutil.ignore_patterns(".venv", ".git", "runs", "bags", "build", "dist", "*.egg-info", "__pycache__",
+                              ".pytest_cache", "tests", "bench", "docs")
+
+
+def run(cmd: list, cwd: Path, timeout: float = 600.0) -> subprocess.CompletedProcess:
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+    return subprocess.run([str(c) for c in cmd], cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
+
+
+def test_wheels_install_into_a_fresh_environment_and_run_from_anywhere(tmp_path: Path) -> None:
+    source = tmp_path / "source"  # a copy: the build must not depend on anything outside the two packages
+    shutil.copytree(ROOT, source, symlinks=True, ignore=SKIP)
+    wheels, venv, elsewhere = tmp_path / "wheels", tmp_path / "venv", tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    built = run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-w", wheels, source,
+                 source / "ros2_ws" / "src" / "moose_ros"], cwd=tmp_path)
+    assert built.returncode == 0, built.stderr[-2000:]
+    core = next(wheels.glob("moose_avoidance-*.whl"))
+    ros = next(wheels.glob("moose_ros-*.whl"))
+    assert run([sys.executable, "-m", "venv", venv], cwd=tmp_path).returncode == 0
+    python, moose = venv / "bin" / "python", venv / "bin" / "moose"
+
+    # the core alone: a scenario runs, and the missing bag recorder is named, not a traceback
+    installed = run([python, "-m", "pip", "install", core], cwd=tmp_path)
+    assert installed.returncode == 0, installed.stderr[-2000:]
+    alone = run([moose, "simulate", "--scenario", "paper_v7_tau1.4", "--duration", "2"], cwd=elsewhere)
+    assert alone.returncode == 0, alone.stderr[-2000:]
+    assert "collision-free" in alone.stdout and "no bag recorded: the bag recorder comes with the moose_ros" in alone.stderr
+    refused = run([moose, "simulate", "--duration", "0.5", "--bag", "b"], cwd=elsewhere)
+    assert refused.returncode == 2 and "moose: error: --bag 'b': the bag recorder comes with" in refused.stderr
+    assert run([python, "-c", "import cyclonedds"], cwd=elsewhere).returncode != 0  # the core does not pull it in
+
+    installed = run([python, "-m", "pip", "install", ros], cwd=tmp_path)
+    assert installed.returncode == 0, installed.stderr[-2000:]
+    where = run([python, "-c", "import moose, moose_ros; from moose_ros.interfaces import msg_dir; "
+                 "print(moose.__file__, moose_ros.__file__, msg_dir(), sep='\\n')"], cwd=elsewhere)
+    assert [Path(p).is_relative_to(venv) for p in where.stdout.split()] == [True, True, True], where.stdout
+    simulated = run([moose, "simulate", "--scenario", "paper_v7_tau1.4", "--no-bag", "--duration", "2"], cwd=elsewhere)
+    assert simulated.returncode == 0 and "collision-free, inside the field" in simulated.stdout, simulated.stderr[-2000:]
+    recorded = run([moose, "simulate", "--scenario", "paper_v5_tau3", "--duration", "0.5"], cwd=elsewhere)
+    bag = re.search(r"^bag\s+(\S+)$", recorded.stdout, re.M)
+    assert recorded.returncode == 0 and bag is not None, recorded.stderr[-2000:]
+    info = run([moose, "bag", "info", bag.group(1)], cwd=elsewhere)
+    assert info.returncode == 0 and "/perception/state" in info.stdout and "moose_msgs/msg/StateEstimate" in info.stdout
+
+    # one node, started by its console script (as `ros2 run` would), announces itself and stops on SIGTERM
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    node = subprocess.Popen([str(venv / "bin" / "observer"), "--param", "scenario=paper_v5_tau3"], cwd=elsewhere, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 60.0
+        lines = []
+        while time.monotonic() < deadline:
+            line = node.stdout.readline() if node.stdout else ""
+            lines.append(line)
+            if "observer started" in line or not line:
+                break
+        assert any("observer started" in line for line in lines), "".join(lines)
+        node.send_signal(signal.SIGTERM)
+        node.wait(timeout=20)
+    finally:
+        node.kill()
+        node.wait()

@@ -1,0 +1,92 @@
+"""Node parameters are typed and strict: unknown keys are errors in the graph as in ``moose simulate``."""
+from __future__ import annotations
+
+import io
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from moose.config import load_config
+from moose.params import ParamError
+from moose.scenario import load_scenario
+from moose_ros.launch import launch, node_overrides
+from moose_ros.parameters import SimulatorParams, check_parameter_file, node_parameters
+
+MOOSE = [sys.executable, "-m", "moose.cli"]
+MISSPELT_GROUP = "/**:\n  ros__parameters:\n    vehicel: {m: 900.0}\n"
+
+
+def test_a_misspelt_group_is_an_error_for_every_node_as_for_simulate(tmp_path: Path) -> None:
+    """The probe of the review: ``vehicel:`` used to be dropped silently by every node."""
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(MISSPELT_GROUP)
+    with pytest.raises(ParamError, match=r"vehicel = \{'m': 900.0\} is unknown"):
+        load_config(bad)  # moose simulate
+    for node in ("observer", "can_bridge", "vehicle_simulator"):
+        with pytest.raises(ParamError, match=rf"{node}.vehicel = .* is unknown"):
+            node_parameters(node, {"vehicel": {"m": 900.0}})
+    result = subprocess.run(MOOSE + ["node", "observer", "--params", str(bad)], capture_output=True, text=True,
+                            timeout=60)
+    assert result.returncode == 2 and "moose: error: observer.vehicel = {'m': 900.0} is unknown" in result.stderr
+
+
+def test_unknown_values_and_wrong_types_of_node_parameters_are_errors() -> None:
+    with pytest.raises(ParamError, match="observer.seed = 3 is unknown"):  # the simulator's, not the observer's
+        node_parameters("observer", {"seed": 3})
+    with pytest.raises(ParamError, match="vehicle_simulator.rate = 'fast' is invalid: expected a number"):
+        node_parameters("vehicle_simulator", {"rate": "fast"})
+    with pytest.raises(ParamError, match="vehicle_simulator.seed = -1 is invalid"):
+        node_parameters("vehicle_simulator", {"seed": -1})
+    with pytest.raises(ParamError, match="vehicle_bus = 'bus' is invalid: expected one of"):
+        node_parameters("vehicle_simulator", {"vehicle_bus": "bus"})
+    with pytest.raises(ParamError, match="can_bridge.can_port = 70000 is invalid"):
+        node_parameters("can_bridge", {"can_port": 70000})
+    with pytest.raises(ParamError, match="weight_fbl.vehicle.m = 'heavy' is invalid"):
+        node_parameters("weight_fbl", {"vehicle": {"m": "heavy"}})
+    config, params = node_parameters("vehicle_simulator", {"use_sim_time": False, "rate": 2, "wait_for": ["observer"],
+                                                           "vehicle": {"mu": 0.4}})
+    assert params == SimulatorParams(rate=2.0, wait_for=("observer",)) and config.vehicle.mu == 0.4
+    scenario = node_parameters("observer", {"speed": 6.0, "tau": 2.5, "obstacle_half_width": 1.8, "mu": 0.3})[1]
+    assert scenario.load_scenario().mu == 0.3  # the ad-hoc test takes mu as moose simulate does
+
+
+def test_a_section_for_no_node_of_the_graph_is_an_error(tmp_path: Path) -> None:
+    path = tmp_path / "typo.yaml"
+    path.write_text("observr:\n  ros__parameters:\n    observer: {q_gamma: 1.0}\n")
+    with pytest.raises(ParamError, match="section 'observr' names no node of the graph"):
+        check_parameter_file(path)
+    result = subprocess.run(MOOSE + ["node", "observer", "--params", str(path)], capture_output=True, text=True,
+                            timeout=60)
+    assert result.returncode == 2 and "names no node of the graph" in result.stderr
+    path.write_text("/observer:\n  ros__parameters:\n    observer: {}\n/**:\n  ros__parameters: {}\n")
+    check_parameter_file(path)
+
+
+def test_the_launcher_refuses_a_bad_configuration_before_any_node_starts(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(MISSPELT_GROUP)
+    started = time.monotonic()
+    with pytest.raises(ParamError, match="vehicel"):
+        launch(load_scenario("paper_v5_tau3"), {}, params_file=str(bad), out=io.StringIO())
+    assert time.monotonic() - started < 5.0  # no process was started and waited for
+    with pytest.raises(ParamError, match="can_lgo = 'x.log' is taken by no node of the graph 'can'"):
+        node_overrides("can", "combined", {"can_lgo": "x.log"})
+    with pytest.raises(ParamError, match="can_interface = 'pcan' is invalid"):
+        node_overrides("car", "combined", {"can_interface": "pcan"})
+    result = subprocess.run(MOOSE + ["launch", "--config", str(bad), "--no-bag"], capture_output=True, text=True,
+                            timeout=60)
+    assert result.returncode == 2 and "vehicel" in result.stderr and "[observer]" not in result.stdout
+
+
+def test_each_node_gets_only_the_parameters_it_takes() -> None:
+    overrides = node_overrides("can", "mpc", {"scenario": "paper_v5_tau3", "can_log": "bus.log", "can_port": 5000},
+                               seed=4, rate=2.0)
+    assert "msf_planner" not in overrides
+    assert overrides["can_bridge"] == {"can_log": "bus.log", "can_port": 5000, "simulation.planner": "mpc",
+                                       "use_sim_time": True}
+    assert overrides["observer"] == {"scenario": "paper_v5_tau3", "simulation.planner": "mpc", "use_sim_time": True}
+    assert overrides["vehicle_simulator"]["seed"] == 4 and overrides["vehicle_simulator"]["vehicle_bus"] == "can"
+    assert overrides["vehicle_simulator"]["wait_for"] == [n for n in overrides if n != "vehicle_simulator"]
