@@ -17,6 +17,7 @@ import pytest
 from rosbags.rosbag2 import Reader
 
 from moose.config import load_config
+from moose.scenario import load_scenario
 from moose_ros import convert as cv
 from moose_ros.bag import BagError, Recorder, bag_info, export, play, read_bag, replan
 from moose_ros.interfaces import from_rosbags
@@ -176,11 +177,11 @@ def test_replay_drives_the_observer_to_the_recorded_estimates(tmp_path: Path) ->
 
 
 def test_replan_reproduces_the_recording_and_sees_a_parameter_change(tmp_path: Path) -> None:
-    config = load_config()
+    config = load_scenario("paper_v7_tau1.4").configure(load_config())  # the run's parameters: its road's μ
     same = replan(EXTREME, config, v_des=7.0)["summary"]
     assert same["steps"] == 46 and same["mpc_status_agreement"] == 1.0
     assert same["rms_ay"] < 1e-6 and same["rms_weight"] < 1e-6
-    changed = dataclasses.replace(config, msf=dataclasses.replace(config.msf, margin=1.5))
+    changed = dataclasses.replace(config, msf=dataclasses.replace(config.msf, omega_track=1.5))
     other = replan(EXTREME, changed, v_des=7.0)["summary"]
     assert other["rms_ay"] > 0.1
     odom_only = tmp_path / "odom_only"
