@@ -160,9 +160,10 @@ def base_python() -> str:
 
 def install_key() -> str:
     """What the prefix's Python packages depend on: the requirements, the project's package
-    definitions and the interpreter that creates the environment."""
+    definitions, the checkout (the project is installed editable from it) and the interpreter
+    that creates the environment."""
     files = [REQUIREMENTS, *PROJECT_FILES]
-    return _digest([f.read_bytes() for f in files] + [sys.version.encode(), base_python().encode()])
+    return _digest([f.read_bytes() for f in files] + [str(REPO).encode(), sys.version.encode(), base_python().encode()])
 
 
 def ensure_installed(prefix: Path, log: Path) -> bool:
