@@ -5,7 +5,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: run test bench clean
+.PHONY: run test bench clean ros
 
 $(STAMP): pyproject.toml ros2_ws/src/moose_ros/setup.py
 	$(PYTHON) -m venv $(VENV)
@@ -25,5 +25,9 @@ bench: $(STAMP)
 	$(BIN)/python bench/bench_graph.py
 	$(BIN)/python bench/bench_memory.py
 
+# Optional: ROS 2 Jazzy (rclpy, Fast DDS) from wheels in .venv-ros and moose_msgs built for it (README).
+ros:
+	$(PYTHON) ros2_ws/ros_prefix.py
+
 clean:
-	rm -rf $(VENV) runs
+	rm -rf $(VENV) .venv-ros runs
