@@ -330,7 +330,7 @@ def test_solver_variants_solve_the_same_problem(change: dict) -> None:
 
 def test_problem_is_built_once() -> None:
     a, b = MpcPlanner(DEFAULT, GRID), MpcPlanner(MpcParams(), GRID)
-    assert a._nlp is b._nlp  # same parameter set: one NLP, parametric in the planning inputs
+    assert a.solver is b.solver  # same parameter set: one problem and solver, parametric in the planning inputs
     assert PAPER_CAPS == SolverCaps(10, 100, 1e-3, 1e-3, 1e-3)
 
 
