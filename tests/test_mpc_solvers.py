@@ -23,7 +23,7 @@ def test_unknown_and_duplicate_names_are_refused() -> None:
     with pytest.raises(ValueError, match="'fmincon' is not a registered solver"):
         create(build_problem(MpcParams(), GRID.N_p, GRID.t_s), params)
     with pytest.raises(ValueError, match="registered twice"):
-        register("sqp_lbfgs")(Solver)
+        register("paper_sqp")(Solver)
 
 
 @pytest.mark.parametrize("name", SOLVERS)
@@ -42,8 +42,10 @@ def test_every_solver_keeps_the_contract(name: str) -> None:
     assert result.f_start == pytest.approx(float(reference(guess, p)), rel=1e-9)
     assert result.iterations >= 1 and result.evaluations >= 1 and result.reason
     assert planner.solver.cost(result.u, p) == pytest.approx(result.f, rel=1e-12)
-    if name == "projected_newton":  # a line search on f alone: never worse than the start
+    if name in ("projected_newton", "paper_sqp"):  # line searches on f alone: never worse than the start
         assert result.f <= result.f_start
+    if name == "paper_sqp":
+        assert result.iterations <= 4 and result.evaluations <= 100
 
 
 def test_a_failure_returns_the_start_with_infinite_cost() -> None:

@@ -36,8 +36,8 @@ class ProjectedNewtonSolver(Solver):
         try:
             self._newton = ProjectedNewton(problem.cost_function, newton_options(params))
         except CompilerMissing as error:
-            raise CompilerMissing(f"mpc.solver = projected_newton: {error}; or set mpc.solver to sqp_lbfgs, "
-                                  "which runs in CasADi's virtual machine") from error
+            raise CompilerMissing(f"mpc.solver = projected_newton: {error}; or set mpc.solver to sqp_lbfgs "
+                                  "or paper_sqp, which run without a compiler") from error
 
     def solve(self, guess: np.ndarray, p: np.ndarray) -> SolveResult:
         result = self._newton.solve(guess, p)
