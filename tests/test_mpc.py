@@ -318,7 +318,8 @@ def test_warm_start_from_the_previous_solution_is_not_worse() -> None:
 
 
 @pytest.mark.parametrize("change", [dict(solver="sqp_lbfgs"), dict(solver="sqp_exact"), dict(solver="ipopt"),
-                                    dict(solver="sqp_lbfgs", speed_floor="constraint", qpsol="qpoases")])
+                                    dict(solver="sqp_lbfgs", speed_floor="constraint", qpsol="qpoases"),
+                                    dict(solver="paper_sqp")])
 def test_solver_variants_solve_the_same_problem(change: dict) -> None:
     inp = PlannerInput(0.0, state(), threat(), 7.0, None)
     base = MpcPlanner(DEFAULT, GRID)
@@ -330,7 +331,7 @@ def test_solver_variants_solve_the_same_problem(change: dict) -> None:
 
 def test_problem_is_built_once() -> None:
     a, b = MpcPlanner(DEFAULT, GRID), MpcPlanner(MpcParams(), GRID)
-    assert a._nlp is b._nlp  # same parameter set: one NLP, parametric in the planning inputs
+    assert a.solver is b.solver  # same parameter set: one problem and solver, parametric in the planning inputs
     assert PAPER_CAPS == SolverCaps(10, 100, 1e-3, 1e-3, 1e-3)
 
 
@@ -339,8 +340,9 @@ def test_without_a_c_compiler_the_default_solver_names_the_way_out(tmp_path, mon
     monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
     with pytest.raises(CompilerMissing, match="mpc.solver.*sqp_lbfgs"):
         MpcPlanner(MpcParams(eta_return=0.125), GRID)  # a parameter set not built before
-    assert MpcPlanner(MpcParams(eta_return=0.125, solver="sqp_lbfgs"), GRID).plan(
-        PlannerInput(0.0, state(), threat(), 7.0, None)).status in ("converged", "capped")
+    for solver in ("sqp_lbfgs", "paper_sqp"):  # these evaluate the cost in CasADi's virtual machine instead
+        assert MpcPlanner(MpcParams(eta_return=0.125, solver=solver), GRID).plan(
+            PlannerInput(0.0, state(), threat(), 7.0, None)).status in ("converged", "capped")
 
 
 def test_parameters_are_validated() -> None:
@@ -356,5 +358,7 @@ def test_parameters_are_validated() -> None:
         MpcParams(solver="fmincon")  # type: ignore[arg-type]
     with pytest.raises(ParamError, match="speed_floor"):
         MpcParams(speed_floor="constraint")  # with qrqp
+    with pytest.raises(ParamError, match="speed_floor"):
+        MpcParams(speed_floor="constraint", solver="paper_sqp", qpsol="qpoases")  # bounds only
     with pytest.raises(ParamError, match="max_fun_evals"):
         SolverCaps(max_iter=10, max_fun_evals=5)

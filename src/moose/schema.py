@@ -65,11 +65,13 @@ class PlanningGrid:
     mu: float
     """The planning μ (ε of eq. (ysafe))."""
 
-SolverName = Literal["projected_newton", "sqp_lbfgs", "sqp_exact", "ipopt"]
-"""``projected_newton``: :mod:`moose.projected_newton`, exact Hessian, compiled C (default);
-``sqp_lbfgs``: CasADi's sqpmethod with a BFGS Hessian; ``sqp_exact``: sqpmethod with the exact
-Hessian, regularised to be positive definite; ``ipopt``: interior point (reference)."""
-SOLVERS: tuple[SolverName, ...] = ("projected_newton", "sqp_lbfgs", "sqp_exact", "ipopt")
+SolverName = Literal["projected_newton", "sqp_lbfgs", "sqp_exact", "ipopt", "paper_sqp"]
+"""The MPC's solver (:mod:`moose.mpc.solver`; docs/design.md, "MPC"): ``projected_newton``: exact
+Hessian, compiled C (the default); ``sqp_lbfgs``: CasADi's sqpmethod with a BFGS Hessian;
+``sqp_exact``: sqpmethod with the exact Hessian, regularised to be positive definite; ``ipopt``:
+interior point (a reference); ``paper_sqp``: the paper's baseline, fmincon's SQP algorithm with
+finite-difference gradients, every evaluation counted against Table II's cap."""
+SOLVERS: tuple[SolverName, ...] = ("projected_newton", "sqp_lbfgs", "sqp_exact", "ipopt", "paper_sqp")
 
 QpSolverName = Literal["qrqp", "qpoases"]
 """QP solver of ``sqpmethod`` (the other solvers ignore it)."""
@@ -88,7 +90,8 @@ class SolverCaps:
     max_iter: int = 10
     """Maximum number of SQP iterations."""
     max_fun_evals: int = 100
-    """Maximum number of cost evaluations (guaranteed through ``MpcParams.max_iter_ls``)."""
+    """Maximum number of cost evaluations (``projected_newton``: guaranteed through
+    ``MpcParams.max_iter_ls``; ``paper_sqp``: every evaluation counted, finite differences included)."""
     constraint_tol: float = 1e-3
     """Primal infeasibility tolerance."""
     optimality_tol: float = 1e-3
@@ -130,10 +133,12 @@ class MpcParams:
     caps: SolverCaps = PAPER_CAPS
     """Stopping criteria (Table II)."""
     max_iter_ls: int = 8
-    """Backtracking steps per iteration (each evaluates the cost once)."""
+    """Backtracking steps per iteration (each evaluates the cost once) of ``projected_newton`` and
+    the sqpmethod solvers; ``paper_sqp`` backtracks as fmincon does, within the evaluation cap."""
     ls_beta: float = 0.3
-    """Line-search backtracking factor (0.5 left line searches without decrease on the benchmark's
-    problems with ``projected_newton``)."""
+    """Line-search backtracking factor of ``projected_newton`` and the sqpmethod solvers (0.5 left
+    line searches without decrease on the benchmark's problems with ``projected_newton``);
+    ``paper_sqp`` halves the step."""
     active_set_tol: float = 0.1
     """ε of ``projected_newton``'s ε-active set (normalised inputs): an input this close to its bound,
     the gradient pushing outward, is held there for the Newton step."""
@@ -168,8 +173,9 @@ class MpcParams:
         check("speed_floor", self.speed_floor, lambda v: v in ("penalty", "constraint"), "penalty or constraint")
         check("speed_floor", self.speed_floor,
               lambda v: v == "penalty" or self.solver == "ipopt" or (self.solver.startswith("sqp") and self.qpsol == "qpoases"),
-              "penalty with projected_newton (bounds only) or with qrqp (qrqp stalls on the linear speed "
-              "constraints: 220 ms measured); constraint needs an sqp solver with qpsol = qpoases, or solver = ipopt")
+              "penalty with projected_newton or paper_sqp (bounds only) or with qrqp (qrqp stalls on the linear "
+              "speed constraints: 220 ms measured); constraint needs an sqp solver with qpsol = qpoases, or "
+              "solver = ipopt")
         check("max_iter_ls", self.max_iter_ls,
               lambda v: isinstance(v, int) and v >= 0 and self.caps.max_iter * (1 + v) + 1 <= self.caps.max_fun_evals,
               "an integer ≥ 0 with max_iter (1 + max_iter_ls) + 1 ≤ caps.max_fun_evals "

@@ -1,0 +1,25 @@
+"""MPC planner on the kinematic model, Sec. IV-B: eqs. (skin), (ysafe), (costs), (jcaldef), (planmpc).
+
+* :mod:`moose.mpc.cost` — the problem: cost terms, the kinematic prediction, 𝒥 as a CasADi function;
+* :mod:`moose.mpc.solver` — the solver interface (:class:`Solver`, :class:`SolveResult`) and the
+  registry of solvers by name (``mpc.solver``):
+  ``projected_newton`` (:mod:`moose.mpc.newton`, the default), ``sqp_lbfgs``, ``sqp_exact``,
+  ``ipopt`` (:mod:`moose.mpc.nlpsol`) and ``paper_sqp`` (:mod:`moose.mpc.paper_sqp`, the paper's
+  fmincon baseline);
+* :mod:`moose.mpc.planner` — :class:`MpcPlanner`, one planning instant.
+"""
+from __future__ import annotations
+
+from . import newton, nlpsol, paper_sqp  # noqa: F401  (register the solvers)
+from .cost import (
+    PARAMETERS, Problem, build_problem, epsilon, j_brake, j_return, j_safe, j_stable, j_steer, kinematic_rollout,
+    kinematic_step, past_obstacle, speed_floor, y_safe,
+)
+from .planner import MpcPlanner, keep_speed_non_negative
+from .solver import SolveResult, SolveStatus, Solver, create, register, registered
+
+__all__ = [
+    "MpcPlanner", "PARAMETERS", "Problem", "SolveResult", "SolveStatus", "Solver", "build_problem", "create",
+    "epsilon", "j_brake", "j_return", "j_safe", "j_stable", "j_steer", "keep_speed_non_negative",
+    "kinematic_rollout", "kinematic_step", "past_obstacle", "register", "registered", "speed_floor", "y_safe",
+]

@@ -1,0 +1,54 @@
+"""The MPC's solvers behind one interface (moose.mpc.solver): registry, and the same contract for each."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from moose.mpc import MpcPlanner, SolveResult, Solver, build_problem, create, register, registered
+from moose.schema import SOLVERS, MpcParams, PlanningGrid
+from moose.signals import Obstacle, PlannerInput, StateEstimate, Threat
+
+GRID = PlanningGrid(N_p=10, t_s=0.2, a_x_max=6.0, a_y_max=6.0, mu=0.3)
+
+
+def test_the_registry_holds_exactly_the_names_a_configuration_may_give() -> None:
+    assert sorted(registered()) == sorted(SOLVERS)
+
+
+def test_unknown_and_duplicate_names_are_refused() -> None:
+    params = MpcParams()
+    object.__setattr__(params, "solver", "fmincon")  # past the schema's validation
+    with pytest.raises(ValueError, match="'fmincon' is not a registered solver"):
+        create(build_problem(MpcParams(), GRID.N_p, GRID.t_s), params)
+    with pytest.raises(ValueError, match="registered twice"):
+        register("paper_sqp")(Solver)
+
+
+@pytest.mark.parametrize("name", SOLVERS)
+def test_every_solver_keeps_the_contract(name: str) -> None:
+    """Bounds, a cost that is the problem's cost at the returned point, the start's cost, a status."""
+    planner = MpcPlanner(MpcParams(solver=name), GRID)
+    reference = build_problem(MpcParams(), GRID.N_p, GRID.t_s).cost_function  # CasADi's virtual machine
+    threat = Threat(0.0, Obstacle(12.0, 14.0, -0.5, 2.4), 2.0, 2.4, 0.5, 1, 0.0)
+    inp = PlannerInput(0.0, StateEstimate(0.0, 0.0, 0.2, 0.0, 6.0, 0.3, 0.0, 0.0), threat, 6.0, None)
+    p, guess = planner.parameters(inp), planner.initial_guess(inp).ravel()
+    result = planner.solver.solve(guess.copy(), p)
+    assert isinstance(result, SolveResult)
+    assert result.status in ("converged", "capped")
+    assert result.u.shape == (2 * GRID.N_p,) and np.all(np.abs(result.u) <= 1.0)
+    assert result.f == pytest.approx(float(reference(result.u, p)), rel=1e-9)
+    assert result.f_start == pytest.approx(float(reference(guess, p)), rel=1e-9)
+    assert result.iterations >= 1 and result.evaluations >= 1 and result.reason
+    assert planner.solver.cost(result.u, p) == pytest.approx(result.f, rel=1e-12)
+    if name in ("projected_newton", "paper_sqp"):  # line searches on f alone: never worse than the start
+        assert result.f <= result.f_start
+    if name == "paper_sqp":
+        assert result.iterations <= 4 and result.evaluations <= 100
+
+
+def test_a_failure_returns_the_start_with_infinite_cost() -> None:
+    failed = SolveResult.failure(np.zeros(4), 0, 1, "not_finite")
+    assert failed.status == "failed" and failed.f == math.inf and failed.f_start == math.inf
+    assert np.array_equal(failed.u, np.zeros(4))
