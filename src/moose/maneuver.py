@@ -210,7 +210,7 @@ class MaxSteeringTable:
     """
 
     def __init__(self, t: np.ndarray, v: np.ndarray, y: np.ndarray, vY: np.ndarray, aY: np.ndarray,
-                 mu: float, t_max: float | None = None) -> None:
+                 mu: float, t_max: float | None = None, t_lock: float = 0.0) -> None:
         grid_t = np.asarray(t, dtype=float)
         self.t_max = float(grid_t[-1] if t_max is None else t_max)
         """Longest time answered (s); later times are clamped."""
@@ -220,6 +220,8 @@ class MaxSteeringTable:
         """Tabulated speeds (m/s)."""
         self.mu = float(mu)
         """Friction the maneuver was integrated with."""
+        self.t_lock = float(t_lock)
+        """Time the steering takes from straight to full lock, δ_max / δ̇_max (s)."""
         y = np.asarray(y, dtype=float)
         self._grids = {"y": y, "vY": np.asarray(vY, dtype=float), "aY": np.asarray(aY, dtype=float),
                        "reach": np.maximum.accumulate(y, axis=0)}
@@ -246,7 +248,8 @@ class MaxSteeringTable:
         stretch = (params.v_min + params.dv_table) / params.v_min
         t_end = params.dt_table * math.ceil(params.t_max * stretch / params.dt_table - 1e-9)
         prof = maneuver_profile(vehicle, vehicle.mu, speeds, t_end, params.dt_integration, every)
-        return cls(prof.t, speeds, prof.y, prof.vY, prof.aY, vehicle.mu, params.t_max)
+        return cls(prof.t, speeds, prof.y, prof.vY, prof.aY, vehicle.mu, params.t_max,
+                   vehicle.delta_max / vehicle.delta_rate_max)
 
     # -- interpolation ---------------------------------------------------------------------------
     def _scalar(self, name: str, t: float, vx: float, power: int) -> float:

@@ -66,6 +66,21 @@ def zoh_rollout(state: np.ndarray, accel: np.ndarray, t_s: float) -> np.ndarray:
     return out
 
 
+def _quintic(left: tuple[float, float, float], right: tuple[float, float, float], length: float,
+             x: float) -> tuple[float, float]:
+    """Position and velocity at ``x`` ∈ [0, 1] of the quintic Hermite curve over an interval of ``length``
+    seconds that matches (position, velocity, acceleration) ``left`` at its start and ``right`` at its end."""
+    (p0, v0, a0), (p1, v1, a1), h = left, right, length
+    x2, x3, x4, x5 = x * x, x ** 3, x ** 4, x ** 5
+    position = (p0 * (1 - 10 * x3 + 15 * x4 - 6 * x5) + h * v0 * (x - 6 * x3 + 8 * x4 - 3 * x5)
+                + h * h * a0 * 0.5 * (x2 - 3 * x3 + 3 * x4 - x5) + h * h * a1 * 0.5 * (x3 - 2 * x4 + x5)
+                + h * v1 * (-4 * x3 + 7 * x4 - 3 * x5) + p1 * (10 * x3 - 15 * x4 + 6 * x5))
+    slope = (p0 * (-30 * x2 + 60 * x3 - 30 * x4) + h * v0 * (1 - 18 * x2 + 32 * x3 - 15 * x4)
+             + h * h * a0 * 0.5 * (2 * x - 9 * x2 + 12 * x3 - 5 * x4) + h * h * a1 * 0.5 * (3 * x2 - 8 * x3 + 5 * x4)
+             + h * v1 * (-12 * x2 + 28 * x3 - 15 * x4) + p1 * (30 * x2 - 60 * x3 + 30 * x4))
+    return position, slope / h
+
+
 @dataclasses.dataclass(frozen=True)
 class Evasion:
     """The S-curve latched at detection for one obstacle."""
@@ -81,6 +96,9 @@ class Evasion:
     """Time after detection at which the counter-steer starts (s)."""
     target: float
     """Offset W_end the S-curve arrives at, at 2 s₁ (m)."""
+    swing: float
+    """Duration of the counter-steer transition (s): the steering's time from κ-lock to the opposite,
+    2 κ δ_max / δ̇_max, centred on s₁ (:meth:`MsfPlanner.evasion_reference`)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -114,18 +132,24 @@ class MsfPlanner:
 
     # -- the evasion S-curve -------------------------------------------------------------------------
     def evasion(self, obstacle: Obstacle, t0: float, w: float, tau: float, vx: float) -> Evasion:
-        """The S-curve for a threat of width ``w`` at time to collision ``tau``, at the speed ``vx``."""
+        """The S-curve for a threat of width ``w`` at time to collision ``tau``, at the speed ``vx``.
+
+        Its position at the near edge is that of the reference the car is given, the counter-steer's
+        transition included (:meth:`evasion_reference`).
+        """
         p, y = self.params, self.table.y_max
         target = w + p.margin
         v = max(vx, 0.0)
         tau = max(tau, 0.0)
+        swing = 2.0 * self.table.t_lock
         arrive = p.reach_fraction * tau
         half = y(0.5 * arrive, v)
-        if 2.0 * half >= target and half > 1e-9:
-            return Evasion(obstacle, t0, v, target / (2.0 * half), 0.5 * arrive, target)
+        kappa = target / (2.0 * half) if half > 1e-9 else math.inf
+        if kappa <= 1.0:
+            return Evasion(obstacle, t0, v, kappa, 0.5 * arrive, target, kappa * swing)
 
-        def at_tau(s1: float) -> float:  # ỹ_ref(τ) for κ = 1 and the counter-steer from s1
-            return y(tau, v) if s1 >= tau else 2.0 * y(s1, v) - y(2.0 * s1 - tau, v)
+        def at_tau(s1: float) -> float:  # the reference at τ for κ = 1 and the counter-steer from s1
+            return self.evasion_reference(tau, Evasion(obstacle, t0, v, 1.0, s1, 2.0 * y(s1, v), swing))[0]
 
         # past half a turn y_max falls again: the counter-steer starts by its peak at the latest
         profile = np.asarray(y(self.table.t, v))
@@ -134,26 +158,41 @@ class MsfPlanner:
         if at_tau(hi) <= target:
             s1 = hi
         else:
-            for _ in range(40):  # ỹ_ref(τ) grows with s1 while y_max is convex (its early part)
+            for _ in range(30):  # ỹ_ref(τ) grows with s1 while y_max is convex (its early part)
                 mid = 0.5 * (lo + hi)
                 lo, hi = (mid, hi) if at_tau(mid) < target else (lo, mid)
             s1 = hi
-        return Evasion(obstacle, t0, v, 1.0, s1, 2.0 * y(s1, v))
+        return Evasion(obstacle, t0, v, 1.0, s1, 2.0 * y(s1, v), swing)
 
     def evasion_reference(self, s: float, e: Evasion) -> tuple[float, float, float]:
-        """(ỹ_ref, ẏ_ref, mean ÿ_ref over the coming step) ``s`` seconds after detection."""
+        """(ỹ_ref, ẏ_ref, mean ÿ_ref over the coming step) ``s`` seconds after detection.
+
+        The mirror flips the lateral acceleration at s₁, which the car can only do as fast as its
+        steering swings from κ-lock to the other side (``e.swing``): over that window, centred on
+        s₁, the curve is a quintic that matches position, velocity and acceleration at both ends,
+        so the acceleration passes through zero smoothly; start, end and arrival are unchanged.
+        """
         ts = self.grid.t_s
+        y, yd, ydd = self.table.y_max, self.table.v_Y_max, self.table.a_Y_max
+        k, half = e.kappa, min(0.5 * e.swing, e.s1)
+
+        def raw(u: float) -> tuple[float, float, float]:
+            if u <= 0.0:
+                return 0.0, 0.0, 0.0
+            if u <= e.s1:
+                return k * y(u, e.vx), k * yd(u, e.vx), k * ydd(u, e.vx)
+            if u < 2.0 * e.s1:
+                m = 2.0 * e.s1 - u
+                return e.target - k * y(m, e.vx), k * yd(m, e.vx), -k * ydd(m, e.vx)
+            return e.target, 0.0, 0.0
 
         def position(u: float) -> tuple[float, float]:
-            if u <= 0.0:
-                return 0.0, 0.0
-            if u <= e.s1:
-                return e.kappa * self.table.y_max(u, e.vx), e.kappa * self.table.v_Y_max(u, e.vx)
-            if u < 2.0 * e.s1:
-                mirror = 2.0 * e.s1 - u
-                return (e.target - e.kappa * self.table.y_max(mirror, e.vx),
-                        e.kappa * self.table.v_Y_max(mirror, e.vx))
-            return e.target, 0.0
+            if half <= 0.0 or abs(u - e.s1) >= half:
+                p, v, _ = raw(u)
+                return p, v
+            a, length = e.s1 - half, 2.0 * half
+            left, right = raw(a), raw(e.s1 + half)
+            return _quintic(left, right, length, (u - a) / length)
 
         y_ref, v_ref = position(s)
         return y_ref, v_ref, (position(s + ts)[1] - v_ref) / ts
