@@ -13,7 +13,8 @@ from moose.canbus.bus import open_bus
 from moose.canbus.busload import worst_case_bus_load, worst_case_frame_bits
 from moose.canbus.codec import Codec, crc8_j1850, load_database
 from moose.canbus.ecu import VehicleEcu
-from moose.canbus.safety import Command, CommandGuard, GuardParams
+from moose.canbus.safety import Command, GuardParams
+from moose.params import ParamError
 from moose.signals import EpsSample, GpsSample, ImuSample, WheelSpeedSample
 
 DB = load_database()
@@ -144,7 +145,7 @@ def test_bridge_and_ecu_over_a_virtual_bus() -> None:
 
 
 def test_unknown_interface_is_refused() -> None:
-    with pytest.raises(ValueError, match="interface = 'serial'"):
+    with pytest.raises(ParamError, match="interface = 'serial'"):
         open_bus("serial", "x")
 
 

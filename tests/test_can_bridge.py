@@ -194,11 +194,12 @@ def test_bus_link_reopens_a_failed_bus_after_the_backoff() -> None:
         assert peer.recv(timeout=1.0) is not None
         link.bus.shutdown()  # type: ignore[union-attr]  # the interface goes away under the link
         assert not link.send([frame], 0.2) and link.bus is None and "send failed" in health.last_error
-        assert link.receive(0.25) == [] and link.bus is None  # back-off 0.2 s after the second failure
+        assert link.receive(0.25, 10) == ([], False) and link.bus is None  # back-off 0.2 s after the second failure
         peer.send(Codec(DB).encode("EPS_STATUS", {"SteerAngle": 0.1}))
-        assert link.receive(0.4) == [] and link.bus is not None  # re-opened (frames sent before are gone)
+        assert link.receive(0.4, 10) == ([], False) and link.bus is not None  # re-opened (frames sent before are gone)
         peer.send(Codec(DB).encode("EPS_STATUS", {"SteerAngle": 0.1}))
-        assert len(link.receive(0.41)) == 1 and health.reopens == 2
+        frames, full = link.receive(0.41, 10)
+        assert len(frames) == 1 and not full and health.reopens == 2
     finally:
         link.close()
         peer.shutdown()
@@ -226,7 +227,7 @@ def test_bus_link_logs_every_frame_in_candump_format(tmp_path) -> None:
         try:
             assert link.send(sent, 0.0)
             peer.send(codec.encode("EPS_STATUS", {"SteerAngle": -0.05}, 0.2))
-            assert len(link.receive(0.2)) == 1
+            assert len(link.receive(0.2, 10)[0]) == 1
         finally:
             link.close()
             peer.shutdown()
