@@ -173,7 +173,7 @@ def test_dump_decodes_and_replay_sends_a_recorded_log(tmp_path) -> None:
     assert lines[5].split()[3] == "IMU" or " IMU " in lines[5]
     assert "YawRate=0.05" in lines[5]
     assert "DROPPED (unknown_id)" in lines[-1]
-    with pytest.raises(FileNotFoundError, match="does not exist"):
+    with pytest.raises(ParamError, match="missing.asc' does not exist"):
         replay(tmp_path / "missing.asc", sender)
 
 
