@@ -334,8 +334,13 @@ def test_a_late_command_tick_makes_the_heartbeat_say_fault_and_sets_tx_late() ->
             status.append((t, values["BRIDGE_HEARTBEAT"]["State"], values["BRIDGE_STATUS"]["TxLate"]))
     assert status[1:3] == [(0.1, 0, 0), (0.2, 0, 0)]  # commanding
     assert (0.49, 2, 1) in status  # the first heartbeat after the stall: fault, TxLate
-    assert status[-1][1:] == (0, 0) and bridge.late_ticks == 1
+    assert status[-1][1:] == (0, 0) and bridge.late_commands == 1
     assert bridge.max_command_gap == pytest.approx(0.2)
+    # late means: more than the timeout less one command period, so frames still land before the ECUs time out
+    assert bridge.late_after == pytest.approx(GUARD.timeout - 0.01)
+    bridge.on_command(Command(0.0, 0.0, 10.0, 10.0))
+    bridge.tick(0.79 + 0.045)  # a 45 ms gap
+    assert bridge.heartbeat_state() == "fault" and bridge.late_commands == 2
 
 
 def test_a_receive_overflow_is_flagged_in_the_next_status_frame_only() -> None:

@@ -107,11 +107,36 @@ def test_the_heartbeat_stops_saying_commanding_when_the_sender_stalls(peer: can.
         diagnostics = runner.diagnostics()
     beats = [(t, v["State"]) for t, name, v in decoded(drain(peer)) if name == "BRIDGE_HEARTBEAT"]
     assert diagnostics.level == WARN and "command frames late" in diagnostics.message
-    assert runner.core.late_ticks >= 1 and runner.core.max_command_gap >= 0.19
+    assert runner.core.late_commands >= 1 and runner.core.max_command_gap >= 0.19
     states = [state for _, state in beats]
     assert 2 in states and states[-1] == 0  # "fault" after the stall, then commanding again
     first_fault = states.index(2)
     assert all(s == 0 for s in states[1:first_fault])
+
+
+def test_a_driver_that_blocks_a_send_is_reported_by_the_next_heartbeat(peer: can.BusABC) -> None:
+    class SlowOnce(can.interfaces.virtual.VirtualBus):
+        """A real virtual bus whose driver blocks once for 60 ms (a full transmit queue)."""
+
+        stalled = False
+
+        def send(self, msg: can.Message, timeout: float | None = None) -> None:
+            if msg.arbitration_id == 0x100 and not SlowOnce.stalled and time.monotonic() > start + 0.3:
+                SlowOnce.stalled = True
+                time.sleep(0.06)
+            super().send(msg, timeout)
+
+    start, wall = time.monotonic(), time.time()  # the virtual bus stamps frames with the wall clock
+    runner = BridgeRunner(BridgeParams(bus=BusParams("virtual", CHANNEL)), opener=lambda: SlowOnce(channel=CHANNEL))
+    with runner:
+        runner.start()
+        for _ in range(70):
+            runner.command(Command(0.0, 0.0, 10.0, 10.0))
+            time.sleep(0.01)
+    assert SlowOnce.stalled and runner.core.late_commands >= 1
+    beats = [(t, v["State"]) for t, name, v in decoded(drain(peer)) if name == "BRIDGE_HEARTBEAT"]
+    first_fault = next(t for t, state in beats if state == 2)
+    assert wall + 0.3 < first_fault < wall + 0.3 + 0.06 + 0.2  # the heartbeat after the late send
 
 
 def test_a_failing_bus_is_an_error_and_is_reopened_after_the_backoff(peer: can.BusABC) -> None:

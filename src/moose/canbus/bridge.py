@@ -12,8 +12,10 @@ limits that :func:`check_limits_encodable` proved encodable at start-up.
 
 The heartbeat says ``commanding`` only while the guard follows a fresh command *and* the
 command frames go out on time: a gap between two command ticks longer than the guard's
-timeout (the sender was stalled; the vehicle's ECUs have timed out) makes the next
-heartbeat say ``fault`` and sets TxLate in BRIDGE_STATUS.  A receive path that hit its
+timeout less one command period (the sender was stalled; the vehicle's ECUs, whose timeout
+is at least the guard's, may have timed out by the time the frames land: the period is the
+margin for the send after the tick) makes the heartbeat of that tick or the next say
+``fault`` and sets TxLate in BRIDGE_STATUS.  A receive path that hit its
 per-cycle bound (a flood, :meth:`note_rx_overflow`) sets RxOverflow.
 
 The python-can I/O around the core is :class:`moose.canbus.runner.BridgeRunner`.
@@ -87,8 +89,10 @@ class BridgeCore:
         self._last_command_tick: Optional[float] = None
         self.max_command_gap = 0.0
         """Longest time between two command ticks (s, caller's clock)."""
-        self.late_ticks = 0
-        """Command ticks later than the guard's timeout after the previous one."""
+        self.late_commands = 0
+        """Command ticks later than :attr:`late_after` after the previous one."""
+        self.late_after = self.guard.params.timeout - self.command_period
+        """A gap between command frames beyond which they are late (s): the timeout less one period."""
         self.rx_overflows = 0
         """Receive cycles that hit the per-cycle frame bound (:meth:`note_rx_overflow`)."""
         self._late = False
@@ -141,8 +145,8 @@ class BridgeCore:
             previous, self._last_command_tick = self._last_command_tick, t
             if previous is not None and t > previous:
                 self.max_command_gap = max(self.max_command_gap, t - previous)
-                if t - previous > self.guard.params.timeout + _EPS:
-                    self.late_ticks += 1
+                if t - previous > self.late_after + _EPS:
+                    self.late_commands += 1
                     self._late = True
             out = self.guard.output(t)
             frames.append(self.codec.encode("CMD_STEER", {"SteerAngleCmd": out.steering_angle,

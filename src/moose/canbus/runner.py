@@ -101,6 +101,7 @@ class BridgeRunner:
         self.sender_error: Optional[str] = None
         """Why the sender thread ended, if it did on its own (then no frames go out and the ECUs time out)."""
         self._reported_overflows = 0
+        self._reported_late = 0
         self.link.ensure_open(clock())  # a failure is reported and retried after the back-off
 
     # -- the node's calls -----------------------------------------------------------------
@@ -147,12 +148,13 @@ class BridgeRunner:
         with self._lock:
             core, guard, health, stats = self.core, self.core.guard, self.core.health, self.core.codec.stats
             overflows, self._reported_overflows = core.rx_overflows - self._reported_overflows, core.rx_overflows
+            late, self._reported_late = core.late_commands - self._reported_late, core.late_commands
             values = {
                 "state": guard.state.value, "heartbeat": core.heartbeat_state(),
                 "command_timeout": str(guard.timed_out), "bus_state": health.state.name.lower(),
                 "rx_frames": str(self.rx_frames), "dropped_frames": str(stats.dropped),
                 "bad_checksum": str(stats.bad_checksum), "bad_counter": str(stats.bad_counter),
-                "rx_overflow_cycles": str(core.rx_overflows), "late_command_ticks": str(core.late_ticks),
+                "rx_overflow_cycles": str(core.rx_overflows), "late_commands": str(core.late_commands),
                 "max_command_gap_ms": f"{1e3 * core.max_command_gap:.1f}", "invalid_commands": str(guard.invalid),
                 "malformed_datagrams": str(getattr(self.link.bus, "malformed", 0)),
                 "send_failures": str(self.send_failures), "io_failures": str(health.io_failures),
@@ -171,8 +173,8 @@ class BridgeRunner:
             if overflows:
                 problems.append(f"receive flood: {overflows} cycles hit the {self.max_frames}-frame "
                                 "bound, the excess was dropped")
-            if core.late_ticks:
-                problems.append(f"command frames late: longest gap {1e3 * core.max_command_gap:.0f} ms")
+            if late:
+                problems.append(f"command frames late {late} times: longest gap {1e3 * core.max_command_gap:.0f} ms")
             if problems:
                 return BridgeDiagnostics(WARN, "; ".join(problems), values)
             return BridgeDiagnostics(OK, "idle: no command yet" if guard.state == GuardState.IDLE else "commanding",
