@@ -162,9 +162,10 @@ class BridgeRunner:
             }
             if self.sender_error is not None:
                 return BridgeDiagnostics(ERROR, f"command sender stopped: {self.sender_error}", values)
-            if health.state == BusState.IO_FAILURE or core.bus_error:
-                return BridgeDiagnostics(ERROR, f"bus error: {health.last_error or health.state.name.lower()}; "
-                                                "re-opening", values)
+            if health.state == BusState.IO_FAILURE:
+                return BridgeDiagnostics(ERROR, f"bus error: {health.last_error}; re-opening after the back-off", values)
+            if core.bus_error:
+                return BridgeDiagnostics(ERROR, f"bus error: {health.last_error or health.state.name.lower()}", values)
             problems = []
             if guard.state == GuardState.MINIMUM_RISK:
                 problems.append("command timeout: minimum-risk maneuver (steering to straight, braking)")
