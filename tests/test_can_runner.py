@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 import threading
 import time
 
@@ -10,7 +12,7 @@ import pytest
 
 from moose.canbus.bus import BusParams, open_bus
 from moose.canbus.codec import Codec
-from moose.canbus.runner import ERROR, OK, WARN, BridgeParams, BridgeRunner, frames_per_period
+from moose.canbus.runner import ERROR, WARN, BridgeParams, BridgeRunner, frames_per_period
 from moose.canbus.safety import Command, GuardState
 from moose.params import ParamError
 
@@ -48,6 +50,25 @@ def test_the_receive_bound_is_a_saturated_bus_per_command_period() -> None:
         BridgeParams(max_frames_per_cycle=0)
 
 
+def test_start_runs_the_bridge_threads_real_time_and_close_restores_the_scheduler() -> None:
+    before = os.sched_getscheduler(0), os.sched_getparam(0).sched_priority
+    with BridgeRunner(BridgeParams(bus=BusParams("virtual", CHANNEL))) as runner:
+        runner.start()
+        time.sleep(0.02)
+        assert runner.realtime_error is None, runner.realtime_error  # root here; elsewhere it needs CAP_SYS_NICE
+        policy = os.sched_getscheduler(0)
+        assert policy & ~os.SCHED_RESET_ON_FORK == os.SCHED_FIFO and os.sched_getparam(0).sched_priority == 10
+        assert runner._thread is not None
+        sender = runner._thread.native_id
+        assert os.sched_getscheduler(sender) & ~os.SCHED_RESET_ON_FORK == os.SCHED_FIFO
+        child = subprocess.run([sys.executable, "-c", "import os; print(os.sched_getscheduler(0))"],
+                               capture_output=True, text=True, check=True)
+        assert int(child.stdout) == os.SCHED_OTHER  # children do not inherit it
+    assert (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority) == before
+    with pytest.raises(ParamError, match="realtime_priority = 100 is invalid"):
+        BridgeParams(realtime_priority=100)
+
+
 def test_the_sender_keeps_its_schedule_and_a_flood_is_cut_counted_and_reported(peer: can.BusABC) -> None:
     runner = BridgeRunner(BridgeParams(bus=BusParams("virtual", CHANNEL)))
     junk = can.Message(arbitration_id=0x555, data=b"\x00" * 8, is_extended_id=False)
@@ -57,7 +78,7 @@ def test_the_sender_keeps_its_schedule_and_a_flood_is_cut_counted_and_reported(p
             runner.command(Command(0.05, 0.0, 20.0, 20.0))
             runner.receive()
             time.sleep(0.01)
-        assert runner.diagnostics().level == OK
+        assert "receive flood" not in runner.diagnostics().message
         for _ in range(1000):
             peer.send(junk)
         before = runner.rx_frames
@@ -74,13 +95,11 @@ def test_the_sender_keeps_its_schedule_and_a_flood_is_cut_counted_and_reported(p
             runner.command(Command(0.05, 0.0, 20.0, 20.0))
             runner.receive()
             time.sleep(0.01)
-        assert runner.diagnostics().level == OK  # reported once, since the previous call
+        assert "receive flood" not in runner.diagnostics().message  # reported once, since the previous call
     frames = [f for f in drain(peer) if f.arbitration_id != 0x555]
     status = [v for _, name, v in decoded(frames) if name == "BRIDGE_STATUS"]
     assert any(s["RxOverflow"] == 1 for s in status)
-    steer = [f.timestamp for f in frames if f.arbitration_id == 0x100]
-    gaps = [b - a for a, b in zip(steer[:-1], steer[1:])]
-    assert len(steer) > 40 and max(gaps) < 0.05
+    assert sum(f.arbitration_id == 0x100 for f in frames) > 40  # the sender ran throughout (gaps: test_can_flood.py)
 
 
 def test_the_heartbeat_stops_saying_commanding_when_the_sender_stalls(peer: can.BusABC) -> None:

@@ -19,6 +19,10 @@ returns, and publishes :meth:`~BridgeRunner.diagnostics`.
   only a software bus (``udp_multicast``, ``virtual``) can deliver more.  What is left waits
   in the socket, whose buffer drops the excess; each cut cycle is counted and flagged
   (RxOverflow in BRIDGE_STATUS, WARN on /diagnostics).
+* **Priority.**  :meth:`~BridgeRunner.start` puts the calling thread and the sender under
+  SCHED_FIFO at ``realtime_priority`` until :meth:`~BridgeRunner.close` (reset on fork: no
+  other thread or child process inherits it).  Both must be real-time: a real-time sender
+  alone waits for the GIL held by a preempted normal thread.
 * **Time.**  The core, the guard and the bus health run on ``clock``; samples are stamped
   with the ``stamp`` the caller passes (the node's ROS time).  With simulated time, pass
   ``clock=<the node's sim clock>``, do not call :meth:`start`, and call :meth:`send_due`
@@ -28,6 +32,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import threading
 import time
 from typing import Any, Callable, Optional
@@ -64,7 +69,17 @@ class BridgeParams:
     """Frames read per receive call (one call per command period); ``None``: what a saturated bus carries in
     one command period (100 at 500 kbit/s and 10 ms)."""
 
+    realtime_priority: int = 10
+    """SCHED_FIFO priority (1–99) of the threads that run the bridge while it is started — the one that calls
+    :meth:`BridgeRunner.start` (call it from the thread that calls :meth:`~BridgeRunner.receive` and
+    :meth:`~BridgeRunner.command`) and the sender; 0 keeps the normal scheduler.  Other
+    processes then cannot hold the command frames back, and since the work per cycle is bounded
+    (``max_frames_per_cycle``) the bridge cannot starve them.  Needs CAP_SYS_NICE or an RLIMIT_RTPRIO at
+    least this high; if refused, the bridge runs on the normal scheduler and /diagnostics warns."""
+
     def __post_init__(self) -> None:
+        check("realtime_priority", self.realtime_priority,
+              lambda v: isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= 99, "an integer in 0..99")
         if self.max_frames_per_cycle is not None:
             check("max_frames_per_cycle", self.max_frames_per_cycle,
                   lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 1, "a positive integer")
@@ -100,6 +115,10 @@ class BridgeRunner:
         """Sender cycles whose frames could not all be sent (bus closed or failing)."""
         self.sender_error: Optional[str] = None
         """Why the sender thread ended, if it did on its own (then no frames go out and the ECUs time out)."""
+        self.realtime_error: Optional[str] = None
+        """Why ``realtime_priority`` could not be applied."""
+        self._scheduler: Optional[tuple[int, int, Any]] = None
+        """(thread id, policy, parameters) of the thread that called :meth:`start`, to restore at :meth:`close`."""
         self._reported_overflows = 0
         self._reported_late = 0
         self.link.ensure_open(clock())  # a failure is reported and retried after the back-off
@@ -107,9 +126,11 @@ class BridgeRunner:
     # -- the node's calls -----------------------------------------------------------------
 
     def start(self) -> None:
-        """Start the sender thread (real time)."""
+        """Raise the calling thread to ``realtime_priority`` and start the sender thread (real time)."""
         if self._thread is not None:
             return
+        if self.params.realtime_priority:
+            self._enter_realtime(self.params.realtime_priority)
         self._thread = threading.Thread(target=self._send_loop, name="can-bridge-sender", daemon=True)
         self._thread.start()
 
@@ -166,7 +187,7 @@ class BridgeRunner:
                 return BridgeDiagnostics(ERROR, f"bus error: {health.last_error}; re-opening after the back-off", values)
             if core.bus_error:
                 return BridgeDiagnostics(ERROR, f"bus error: {health.last_error or health.state.name.lower()}", values)
-            problems = []
+            problems = [self.realtime_error] if self.realtime_error else []
             if guard.state == GuardState.MINIMUM_RISK:
                 problems.append("command timeout: minimum-risk maneuver (steering to straight, braking)")
             elif guard.state == GuardState.STOPPED:
@@ -182,11 +203,18 @@ class BridgeRunner:
                                      values)
 
     def close(self) -> None:
-        """Stop the sender, close the bus and the log."""
+        """Stop the sender, close the bus and the log, give the starting thread its scheduler back."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=1.0)
             self._thread = None
+        if self._scheduler is not None:
+            tid, policy, param = self._scheduler
+            self._scheduler = None
+            try:
+                os.sched_setscheduler(tid, policy, param)
+            except OSError:  # the thread has ended
+                pass
         self.link.close()
         if self._logger is not None:
             with self._lock:
@@ -200,7 +228,19 @@ class BridgeRunner:
 
     # -- the sender thread ----------------------------------------------------------------
 
+    def _enter_realtime(self, priority: int, restore: bool = True) -> None:
+        """SCHED_FIFO for the calling thread; with reset-on-fork, so no thread or process it creates inherits it."""
+        try:
+            saved = (threading.get_native_id(), os.sched_getscheduler(0), os.sched_getparam(0))
+            os.sched_setscheduler(0, os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, os.sched_param(priority))
+            if restore:
+                self._scheduler = saved
+        except (OSError, AttributeError) as exc:  # no permission, or not Linux
+            self.realtime_error = f"not real-time (SCHED_FIFO {priority} refused: {exc})"
+
     def _send_loop(self) -> None:
+        if self.params.realtime_priority:
+            self._enter_realtime(self.params.realtime_priority, restore=False)
         try:
             self._send_periodically()
         except Exception as exc:  # noqa: BLE001 - reported on /diagnostics; the silence times the ECUs out
