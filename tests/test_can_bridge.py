@@ -343,6 +343,21 @@ def test_a_late_command_tick_makes_the_heartbeat_say_fault_and_sets_tx_late() ->
     assert bridge.heartbeat_state() == "fault" and bridge.late_commands == 2
 
 
+def test_command_frames_handed_to_the_bus_late_make_the_same_cycles_heartbeat_say_fault() -> None:
+    bridge, rx = BridgeCore(GUARD), Codec(DB)
+    for k in range(10):  # ticks and sends on time
+        t = round(0.01 * k, 9)
+        bridge.on_command(Command(0.0, 0.0, 10.0, 10.0))
+        decode_all(bridge.command_frames(t), rx)
+        bridge.note_sent(t + 0.001)
+        decode_all(bridge.status_frames(t), rx)
+    bridge.on_command(Command(0.0, 0.0, 10.0, 10.0))
+    decode_all(bridge.command_frames(0.1), rx)  # the tick is on time ...
+    bridge.note_sent(0.1 + 0.06)  # ... but the frames reach the bus 60 ms later
+    values = decode_all(bridge.status_frames(0.1), rx)
+    assert values["BRIDGE_HEARTBEAT"]["State"] == 2 and values["BRIDGE_STATUS"]["TxLate"] == 1
+
+
 def test_a_receive_overflow_is_flagged_in_the_next_status_frame_only() -> None:
     bridge, rx = BridgeCore(GUARD), Codec(DB)
     flags = []

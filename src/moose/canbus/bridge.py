@@ -13,9 +13,10 @@ limits that :func:`check_limits_encodable` proved encodable at start-up.
 The heartbeat says ``commanding`` only while the guard follows a fresh command *and* the
 command frames go out on time: a gap between two command ticks longer than the guard's
 timeout less one command period (the sender was stalled; the vehicle's ECUs, whose timeout
-is at least the guard's, may have timed out by the time the frames land: the period is the
-margin for the send after the tick) makes the heartbeat of that tick or the next say
-``fault`` and sets TxLate in BRIDGE_STATUS.  A receive path that hit its
+is at least the guard's, may have timed out by the time the frames land) makes the heartbeat
+of that tick or the next say ``fault`` and sets TxLate in BRIDGE_STATUS; so does such a gap
+between two hand-overs of command frames to the bus (:meth:`note_sent`), which the I/O shell
+reports before it asks for the status frames of the same cycle.  A receive path that hit its
 per-cycle bound (a flood, :meth:`note_rx_overflow`) sets RxOverflow.
 
 The python-can I/O around the core is :class:`moose.canbus.runner.BridgeRunner`.
@@ -87,10 +88,11 @@ class BridgeCore:
         self._alive = 0
         self._gps_position: Optional[tuple[int, float, float, float]] = None
         self._last_command_tick: Optional[float] = None
+        self._last_command_sent: Optional[float] = None
         self.max_command_gap = 0.0
-        """Longest time between two command ticks (s, caller's clock)."""
+        """Longest time between two command ticks or hand-overs to the bus (s, caller's clock)."""
         self.late_commands = 0
-        """Command ticks later than :attr:`late_after` after the previous one."""
+        """Command ticks or hand-overs later than :attr:`late_after` after the previous one."""
         self.late_after = self.guard.params.timeout - self.command_period
         """A gap between command frames beyond which they are late (s): the timeout less one period."""
         self.rx_overflows = 0
@@ -138,26 +140,45 @@ class BridgeCore:
         return True
 
     def tick(self, t: float) -> list[can.Message]:
-        if not math.isfinite(t):
+        """The frames due at ``t``: :meth:`command_frames`, then :meth:`status_frames`."""
+        return self.command_frames(t) + self.status_frames(t)
+
+    def command_frames(self, t: float) -> list[can.Message]:
+        """CMD_STEER and CMD_TORQUE if a command period is due at ``t`` (the guard's output), else []."""
+        if not math.isfinite(t) or not self._due("command", t, self.command_period):
             return []
-        frames: list[can.Message] = []
-        if self._due("command", t, self.command_period):
-            previous, self._last_command_tick = self._last_command_tick, t
-            if previous is not None and t > previous:
-                self.max_command_gap = max(self.max_command_gap, t - previous)
-                if t - previous > self.late_after + _EPS:
-                    self.late_commands += 1
-                    self._late = True
-            out = self.guard.output(t)
-            frames.append(self.codec.encode("CMD_STEER", {"SteerAngleCmd": out.steering_angle,
-                                                          "SteerRateCmd": out.steering_rate}, t))
-            frames.append(self.codec.encode("CMD_TORQUE", {"TorqueRL": out.torque_rl, "TorqueRR": out.torque_rr}, t))
-        if self._due("status", t, self.status_period):
-            self._alive = (self._alive + 1) & 0xFF
-            frames.append(self.codec.encode("BRIDGE_HEARTBEAT", {
-                "Alive": self._alive, "State": HEARTBEAT_STATE[self.heartbeat_state()]}, t))
-            s, h = self.codec.stats, self.health
-            frames.append(self.codec.encode("BRIDGE_STATUS", {
+        previous, self._last_command_tick = self._last_command_tick, t
+        if previous is not None and t > previous:
+            self._gap(t - previous)
+        out = self.guard.output(t)
+        return [self.codec.encode("CMD_STEER", {"SteerAngleCmd": out.steering_angle,
+                                                "SteerRateCmd": out.steering_rate}, t),
+                self.codec.encode("CMD_TORQUE", {"TorqueRL": out.torque_rl, "TorqueRR": out.torque_rr}, t)]
+
+    def note_sent(self, t: float) -> None:
+        """The command frames were handed to the bus at ``t``: a gap since the previous hand-over counts as
+        late like a gap between ticks (a send delayed after its tick is caught before the status frames
+        are built)."""
+        previous, self._last_command_sent = self._last_command_sent, t
+        if previous is not None and t > previous:
+            self._gap(t - previous)
+
+    def _gap(self, gap: float) -> None:
+        self.max_command_gap = max(self.max_command_gap, gap)
+        if gap > self.late_after + _EPS:
+            self.late_commands += 1
+            self._late = True
+
+    def status_frames(self, t: float) -> list[can.Message]:
+        """BRIDGE_HEARTBEAT and BRIDGE_STATUS if a status period is due at ``t``, else []."""
+        if not math.isfinite(t) or not self._due("status", t, self.status_period):
+            return []
+        self._alive = (self._alive + 1) & 0xFF
+        s, h = self.codec.stats, self.health
+        frames = [
+            self.codec.encode("BRIDGE_HEARTBEAT", {"Alive": self._alive,
+                                                   "State": HEARTBEAT_STATE[self.heartbeat_state()]}, t),
+            self.codec.encode("BRIDGE_STATUS", {
                 "CommandTimeout": int(self.guard.timed_out), "LimitClamp": int(self.guard.clamped),
                 "BusError": int(h.report() or self._external_bus_error),
                 "InvalidCommand": int(self.guard.pop_invalid()),
@@ -166,8 +187,9 @@ class BridgeCore:
                 "ErrorFrames": min(s.error_frames, 255), "BadCounter": min(s.bad_counter, 65535),
                 "BadChecksum": min(s.bad_checksum, 65535),
                 "BadFrame": min(s.unknown_id + s.bad_length + s.undecodable + s.out_of_range, 65535),
-            }, t))
-            self._late = self._overflow = False
+            }, t),
+        ]
+        self._late = self._overflow = False
         return frames
 
     def on_frame(self, frame: can.Message, t: float, stamp: Optional[float] = None) -> Optional[Sample]:

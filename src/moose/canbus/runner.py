@@ -156,11 +156,22 @@ class BridgeRunner:
         return samples
 
     def send_due(self, t: Optional[float] = None) -> None:
-        """Send the frames due at ``t`` (default: now on the clock); the sender thread's cycle."""
+        """Send the frames due at ``t`` (default: now on the clock); the sender thread's cycle.
+
+        The command frames go first; the time they were handed to the bus is reported to the core
+        before it builds the heartbeat, so a send that lands late is never followed by "commanding".
+        """
         t = self.clock() if t is None else t
         with self._lock:
-            frames = self.core.tick(t)
-        if frames and not self.link.send(frames, t):
+            commands = self.core.command_frames(t)
+        sent = self.link.send(commands, t) if commands else True
+        with self._lock:
+            if commands and sent:
+                self.core.note_sent(self.clock())
+            status = self.core.status_frames(t)
+        if status:
+            sent = self.link.send(status, t) and sent
+        if not sent:
             with self._lock:
                 self.send_failures += 1
 
