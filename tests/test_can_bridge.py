@@ -13,9 +13,12 @@ from moose.canbus.bus import BusLink, open_bus
 from moose.canbus.codec import PROTECTED, Codec, command_checksum, load_database
 from moose.canbus.ecu import VehicleEcu
 from moose.canbus.health import BusHealth, BusState, HealthParams, error_frame_state
-from moose.canbus.safety import Command, GuardParams
+from moose.canbus.safety import Command, GuardParams, GuardState
 from moose.params import ParamError
 from moose.signals import EpsSample, GpsSample, ImuSample, WheelSpeedSample
+
+from can_hostile import clock_step, hostile_guard_params
+from can_hostile import wild as wild_value
 
 DB = load_database()
 GUARD = GuardParams()
@@ -192,11 +195,12 @@ def test_bus_link_reopens_a_failed_bus_after_the_backoff() -> None:
         assert peer.recv(timeout=1.0) is not None
         link.bus.shutdown()  # type: ignore[union-attr]  # the interface goes away under the link
         assert not link.send([frame], 0.2) and link.bus is None and "send failed" in health.last_error
-        assert link.receive(0.25) == [] and link.bus is None  # back-off 0.2 s after the second failure
+        assert link.receive(0.25, 10) == ([], False) and link.bus is None  # back-off 0.2 s after the second failure
         peer.send(Codec(DB).encode("EPS_STATUS", {"SteerAngle": 0.1}))
-        assert link.receive(0.4) == [] and link.bus is not None  # re-opened (frames sent before are gone)
+        assert link.receive(0.4, 10) == ([], False) and link.bus is not None  # re-opened (frames sent before are gone)
         peer.send(Codec(DB).encode("EPS_STATUS", {"SteerAngle": 0.1}))
-        assert len(link.receive(0.41)) == 1 and health.reopens == 2
+        frames, full = link.receive(0.41, 10)
+        assert len(frames) == 1 and not full and health.reopens == 2
     finally:
         link.close()
         peer.shutdown()
@@ -225,7 +229,7 @@ def test_bus_link_logs_every_frame_in_candump_format(tmp_path) -> None:
         try:
             assert link.send(sent, 0.0)
             peer.send(codec.encode("EPS_STATUS", {"SteerAngle": -0.05}, 0.2))
-            assert len(link.receive(0.2)) == 1
+            assert len(link.receive(0.2, 10)[0]) == 1
         finally:
             link.close()
             peer.shutdown()
@@ -248,3 +252,142 @@ def test_a_node_does_not_decode_frames_it_transmits_itself() -> None:
     heartbeat = Codec(DB).encode("BRIDGE_HEARTBEAT", {s.name: 0.0 for s in DB.get_message_by_name("BRIDGE_HEARTBEAT").signals
                                                       if s.name != "Counter"})
     assert bridge.on_frame(heartbeat, 0.0) is None and bridge.codec.stats.own_id == 1
+
+
+# -- clock steps, floods and hostile configurations through the bridge core ---------------------------
+
+LSB = {"SteerAngleCmd": 1e-4, "SteerRateCmd": 1e-3, "TorqueRL": 0.01, "TorqueRR": 0.01}
+
+
+def decode_all(frames: list[can.Message], rx: Codec) -> dict[str, dict[str, float]]:
+    """The bridge's frames through an independent codec: each must be valid (CRC, counter, ranges)."""
+    out = {}
+    for frame in frames:
+        decoded = rx.decode(frame)
+        assert decoded is not None, (frame, rx.stats)
+        out[decoded[0]] = decoded[1]
+    return out
+
+
+@settings(max_examples=150, deadline=None)
+@given(hostile_guard_params(),
+       st.lists(st.tuples(clock_step, st.lists(garbage, max_size=30),
+                          st.one_of(st.none(), st.tuples(wild_value, wild_value, wild_value, wild_value)), st.booleans()),
+                min_size=1, max_size=60))
+def test_nothing_received_commanded_or_configured_raises_out_of_the_tick(params: GuardParams, steps: list) -> None:
+    bridge, rx = BridgeCore(params), Codec(DB)
+    period = bridge.command_period
+    t, previous, ticks_since_command = 0.0, None, None
+    for step, junk, command, overflow in steps:
+        t_call = t + step
+        if math.isfinite(t_call):
+            t = t_call
+        if command is not None:
+            bridge.on_command(Command(*command), t_call)
+            ticks_since_command = 0 if Command(*command).valid else None
+        for frame in junk:  # a flood of random, malformed and tampered frames between two ticks
+            bridge.on_frame(frame, t_call)
+        if overflow:
+            bridge.note_rx_overflow()
+        frames = bridge.tick(t_call)
+        values = decode_all(frames, rx)
+        if "CMD_STEER" not in values:
+            continue
+        if ticks_since_command is not None:
+            ticks_since_command += 1
+        steer, torque = values["CMD_STEER"], values["CMD_TORQUE"]
+        limits = {"SteerAngleCmd": params.delta_max, "SteerRateCmd": params.steer_rate_limit,
+                  "TorqueRL": params.torque_max, "TorqueRR": params.torque_max}
+        now = {**steer, **torque}
+        for name, limit in limits.items():
+            assert abs(now[name]) <= limit + LSB[name], name
+        if previous is not None:  # one command period's step at the limit rate, one LSB of rounding each side
+            steps_ok = {"SteerAngleCmd": params.steer_rate_limit * period, "TorqueRL": params.torque_rate_limit * period,
+                        "TorqueRR": params.torque_rate_limit * period}
+            for name, bound in steps_ok.items():
+                assert abs(now[name] - previous[name]) <= bound + 2 * LSB[name], name
+        previous = now
+        if bridge.guard.state == GuardState.COMMANDING:  # the timeout, counted in command frames
+            assert ticks_since_command is not None and (ticks_since_command - 1) * period <= params.timeout + 1e-9
+        if "BRIDGE_HEARTBEAT" in values and values["BRIDGE_HEARTBEAT"]["State"] == 0:
+            assert bridge.guard.state == GuardState.COMMANDING
+
+
+def test_command_frames_keep_coming_after_the_clock_steps_back() -> None:
+    bridge = BridgeCore(GUARD)
+    for k in range(50):
+        bridge.on_command(Command(0.1, 0.0, 50.0, 50.0))
+        bridge.tick(round(100.0 + 0.01 * k, 9))
+    sent = []
+    for k in range(20):  # the caller's clock stepped back 5 s
+        bridge.on_command(Command(0.1, 0.0, 50.0, 50.0))
+        sent.append(sum(f.arbitration_id == 0x100 for f in bridge.tick(round(95.5 + 0.01 * k, 9))))
+    assert sent == [1] * 20 and bridge.guard.state == GuardState.COMMANDING
+
+
+def test_a_late_command_tick_makes_the_heartbeat_say_fault_and_sets_tx_late() -> None:
+    bridge, rx = BridgeCore(GUARD), Codec(DB)
+    status = []
+    times = [round(0.01 * k, 9) for k in range(30)] + [0.49] + [round(0.5 + 0.01 * k, 9) for k in range(1, 30)]
+    for t in times:  # commands all the time; the ticks stall from 0.29 s to 0.49 s
+        bridge.on_command(Command(0.0, 0.0, 10.0, 10.0))
+        values = decode_all(bridge.tick(t), rx)
+        if "BRIDGE_HEARTBEAT" in values:
+            status.append((t, values["BRIDGE_HEARTBEAT"]["State"], values["BRIDGE_STATUS"]["TxLate"]))
+    assert status[1:3] == [(0.1, 0, 0), (0.2, 0, 0)]  # commanding
+    assert (0.49, 2, 1) in status  # the first heartbeat after the stall: fault, TxLate
+    assert status[-1][1:] == (0, 0) and bridge.late_commands == 1
+    assert bridge.max_command_gap == pytest.approx(0.2)
+    # late means: more than the timeout less one command period, so frames still land before the ECUs time out
+    assert bridge.late_after == pytest.approx(GUARD.timeout - 0.01)
+    bridge.on_command(Command(0.0, 0.0, 10.0, 10.0))
+    bridge.tick(0.79 + 0.045)  # a 45 ms gap
+    assert bridge.heartbeat_state() == "fault" and bridge.late_commands == 2
+
+
+def test_command_frames_handed_to_the_bus_late_make_the_same_cycles_heartbeat_say_fault() -> None:
+    bridge, rx = BridgeCore(GUARD), Codec(DB)
+    for k in range(10):  # ticks and sends on time
+        t = round(0.01 * k, 9)
+        bridge.on_command(Command(0.0, 0.0, 10.0, 10.0))
+        decode_all(bridge.command_frames(t), rx)
+        bridge.note_sent(t + 0.001)
+        decode_all(bridge.status_frames(t), rx)
+    bridge.on_command(Command(0.0, 0.0, 10.0, 10.0))
+    decode_all(bridge.command_frames(0.1), rx)  # the tick is on time ...
+    bridge.note_sent(0.1 + 0.06)  # ... but the frames reach the bus 60 ms later
+    values = decode_all(bridge.status_frames(0.1), rx)
+    assert values["BRIDGE_HEARTBEAT"]["State"] == 2 and values["BRIDGE_STATUS"]["TxLate"] == 1
+
+
+def test_a_receive_overflow_is_flagged_in_the_next_status_frame_only() -> None:
+    bridge, rx = BridgeCore(GUARD), Codec(DB)
+    flags = []
+    for k in range(31):
+        if k == 12:
+            bridge.note_rx_overflow()
+        values = decode_all(bridge.tick(round(0.01 * k, 9)), rx)
+        if "BRIDGE_STATUS" in values:
+            flags.append(values["BRIDGE_STATUS"]["RxOverflow"])
+    assert flags == [0, 0, 1, 0] and bridge.rx_overflows == 1
+
+
+def test_lost_commands_lead_the_frames_into_the_minimum_risk_maneuver() -> None:
+    bridge, rx = BridgeCore(GUARD), Codec(DB)
+    car = Codec(DB)
+    frames_by_t = {}
+    for k in range(120):
+        t = round(0.01 * k, 9)
+        if t <= 0.2:
+            bridge.on_command(Command(0.1, 0.5, 150.0, 150.0), t)
+        bridge.on_frame(car.encode("WHEEL_SPEEDS", {"OmegaRL": 20.0, "OmegaRR": 20.0}), t)
+        frames_by_t[t] = decode_all(bridge.tick(t), rx)
+    deadline = 0.2 + GUARD.timeout
+    first = min(t for t in frames_by_t if t > deadline + 1e-9)
+    assert first <= deadline + 0.01 + 1e-9 and bridge.guard.state == GuardState.MINIMUM_RISK
+    steer = {t: v["CMD_STEER"] for t, v in frames_by_t.items()}
+    torque = {t: v["CMD_TORQUE"]["TorqueRL"] for t, v in frames_by_t.items()}
+    assert steer[first]["SteerRateCmd"] < 0.0 and steer[first]["SteerAngleCmd"] < steer[0.2]["SteerAngleCmd"]
+    assert all(steer[t]["SteerAngleCmd"] == pytest.approx(0.0, abs=1e-4) for t in steer if t >= first + 0.1)
+    assert torque[first] == pytest.approx(130.0) and min(torque.values()) == pytest.approx(-GUARD.brake_torque)
+    assert frames_by_t[0.3]["BRIDGE_HEARTBEAT"]["State"] == 1 and frames_by_t[0.3]["BRIDGE_STATUS"]["CommandTimeout"] == 1

@@ -8,8 +8,17 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from moose.canbus.busload import frame_loads, worst_case_bus_load, worst_case_frame_bits
-from moose.canbus.codec import PROTECTED, Codec, command_checksum, crc8_j1850, load_database
-from moose.params import VehicleParams
+from moose.canbus.codec import (
+    PROTECTED,
+    Codec,
+    command_checksum,
+    crc8_j1850,
+    load_database,
+)
+from moose.canbus.bridge import LIMIT_SIGNALS, BridgeCore, check_limits_encodable
+from moose.canbus.safety import HARD_LIMIT, GuardParams
+from moose.params import VEHICLE_LIMITS, ParamError, VehicleParams
+from moose.resources import DBC_FILE
 
 DB = load_database()
 VEHICLE = VehicleParams()
@@ -18,10 +27,10 @@ CYCLE_MS = {"CMD_STEER": 10, "CMD_TORQUE": 10, "EPS_STATUS": 10, "WHEEL_SPEEDS":
             "GPS_POSITION": 1000, "GPS_VELOCITY": 1000, "BRIDGE_HEARTBEAT": 100, "BRIDGE_STATUS": 100}
 """The brief's cycle times."""
 
-MUST_COVER = {  # signal: the magnitude it must represent (vehicle limits of the brief)
-    ("CMD_STEER", "SteerAngleCmd"): VEHICLE.delta_max,
-    ("CMD_TORQUE", "TorqueRL"): VEHICLE.T_max, ("CMD_TORQUE", "TorqueRR"): VEHICLE.T_max,
-    ("EPS_STATUS", "SteerAngle"): VEHICLE.delta_max,
+MUST_COVER = {  # signal: the magnitude it must represent (the vehicle's hard limits, sensor ranges of the brief)
+    ("CMD_STEER", "SteerAngleCmd"): VEHICLE_LIMITS.delta_max, ("CMD_STEER", "SteerRateCmd"): VEHICLE_LIMITS.delta_rate_max,
+    ("CMD_TORQUE", "TorqueRL"): VEHICLE_LIMITS.T_max, ("CMD_TORQUE", "TorqueRR"): VEHICLE_LIMITS.T_max,
+    ("EPS_STATUS", "SteerAngle"): VEHICLE_LIMITS.delta_max,
     ("WHEEL_SPEEDS", "OmegaRL"): 20.0 / VEHICLE.r, ("WHEEL_SPEEDS", "OmegaRR"): 20.0 / VEHICLE.r,
     ("IMU", "YawRate"): 2.0, ("IMU", "AccelX"): 20.0, ("IMU", "AccelY"): 20.0,
     ("GPS_VELOCITY", "VelX"): 20.0, ("GPS_VELOCITY", "VelY"): 20.0,
@@ -50,7 +59,36 @@ def test_frame_table_matches_the_brief() -> None:
     fix_age = DB.get_message_by_name("GPS_VELOCITY").get_signal_by_name("FixAge")
     assert fix_age.unit == "s" and fix_age.maximum >= 1.0
     status = {s.name for s in DB.get_message_by_name("BRIDGE_STATUS").signals}
-    assert {"CommandTimeout", "LimitClamp", "BusError", "BadCounter", "BadChecksum", "BadFrame"} <= status
+    assert {"CommandTimeout", "LimitClamp", "BusError", "BadCounter", "BadChecksum", "BadFrame", "TxLate",
+            "RxOverflow"} <= status
+
+
+def test_every_hard_limit_of_the_vehicle_is_encodable_in_the_command_frames() -> None:
+    hard = GuardParams()  # the defaults are the hard limits: the loosest configuration that validates
+    assert {getattr(hard, name) for name in HARD_LIMIT} == {getattr(VEHICLE_LIMITS, f) for f in HARD_LIMIT.values()}
+    check_limits_encodable(DB, hard)
+    rx = Codec(DB)
+    tx = Codec(DB)
+    for sign in (-1.0, 1.0):
+        for (frame, signal), limit_name in LIMIT_SIGNALS.items():
+            values = {s.name: 0.0 for s in DB.get_message_by_name(frame).signals if s.name not in ("Counter", "Checksum")}
+            values[signal] = sign * getattr(hard, limit_name)
+            decoded = rx.decode(tx.encode(frame, values))
+            assert decoded is not None and decoded[1][signal] == pytest.approx(values[signal], abs=1e-9)
+
+
+@pytest.mark.parametrize("signal, text, limit", [
+    ("SteerAngleCmd", "(0.0001,0) [-0.2|0.2]", "delta_max = 0.3"),
+    ("SteerRateCmd", "(0.001,0) [-0.5|0.5]", "steer_rate_limit = 1.0"),
+    ("TorqueRL", "(0.01,0) [-150|150]", "torque_max = 200.0"),
+])
+def test_a_dbc_that_cannot_carry_a_limit_is_refused_at_start_up(signal: str, text: str, limit: str) -> None:
+    original = DBC_FILE.read_text()
+    line = next(l for l in original.splitlines() if f"SG_ {signal} :" in l)
+    narrowed = line[:line.index("(")] + text + " " + line[line.index('"'):]
+    db = cantools.database.load_string(original.replace(line, narrowed), "dbc")
+    with pytest.raises(ParamError, match=rf"{limit} is invalid: CMD_\w+\.{signal} \(range .*\) cannot carry"):
+        BridgeCore(GuardParams(), Codec(db, node="BRIDGE"))
 
 
 def test_every_signal_round_trips_at_its_limits_and_zero() -> None:

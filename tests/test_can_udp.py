@@ -2,8 +2,8 @@
 
 A unique IPv4 group (239.192.0.0/14, organisation-local scope) and UDP port per test run.
 The ECU process runs the real plant and sensors behind ``VehicleEcu``; this process runs
-``BridgeCore`` through ``BusLink``, with a feedback EPS law closing the steering loop over
-the bus.  When raw packet sockets are allowed, every interface is watched during the run:
+the bridge as the node does — a ``BridgeRunner`` with its sender thread, commands forwarded
+and samples taken every 10 ms — with a feedback EPS law closing the steering loop over the bus.  When raw packet sockets are allowed, every interface is watched during the run:
 the frames must appear on ``lo`` and nothing of the group (data or IGMP) anywhere else.
 """
 from __future__ import annotations
@@ -22,9 +22,8 @@ from typing import Any
 
 import pytest
 
-from moose.canbus.bridge import BridgeCore
-from moose.canbus.bus import BusLink, LoopbackMulticastBus, open_bus
-from moose.canbus.health import BusHealth
+from moose.canbus.bus import BusParams, LoopbackMulticastBus
+from moose.canbus.runner import BridgeParams, BridgeRunner
 from moose.canbus.safety import Command
 from moose.signals import EpsSample, GpsSample, ImuSample, WheelSpeedSample
 
@@ -168,29 +167,31 @@ def run_bridge(group: str, port: int) -> dict[str, Any]:
     try:
         ready, _, _ = select.select([child.stdout], [], [], 60.0)
         assert ready and child.stdout is not None and child.stdout.readline().strip() == "ready", child.stderr.read()
-        bridge = BridgeCore()
-        link = BusLink(lambda: open_bus("udp_multicast", group, port), BusHealth())
+        runner = BridgeRunner(BridgeParams(bus=BusParams("udp_multicast", group, port)))
+        bridge = runner.core
         records: list[Any] = []
         delta_meas, start, k = 0.0, time.monotonic(), 0
-        while k * 0.01 <= RUN_S:
-            t = k * 0.01
-            lag = t - (time.monotonic() - start)
-            if lag > 0:
-                time.sleep(lag)
-            for frame in link.receive(t):
-                record = bridge.on_frame(frame, t)
-                if record is not None:
+        runner.start()
+        try:
+            while k * 0.01 <= RUN_S:
+                t = k * 0.01
+                lag = t - (time.monotonic() - start)
+                if lag > 0:
+                    time.sleep(lag)
+                for record in runner.receive(stamp=t):
                     records.append(record)
                     if isinstance(record, EpsSample):
                         delta_meas = record.delta
-            bridge.on_command(Command(0.1, 20.0 * (0.1 - delta_meas), 100.0, 100.0), t)
-            assert link.send(bridge.tick(t), t), bridge.health.last_error
-            if k == 50:
-                with open("/proc/net/igmp") as f:
-                    igmp_lines = f.read().splitlines()
-            k += 1
-        malformed = link.bus.malformed if isinstance(link.bus, LoopbackMulticastBus) else -1
-        link.close()
+                runner.command(Command(0.1, 20.0 * (0.1 - delta_meas), 100.0, 100.0))
+                if k == 50:
+                    with open("/proc/net/igmp") as f:
+                        igmp_lines = f.read().splitlines()
+                k += 1
+            diagnostics = runner.diagnostics()
+            malformed = runner.link.bus.malformed if isinstance(runner.link.bus, LoopbackMulticastBus) else -1
+        finally:
+            runner.close()
+        assert runner.send_failures == 0 and diagnostics.level != 2, diagnostics  # no bus error
         out, err = child.communicate(timeout=30.0)
         assert child.returncode == 0, err
     finally:

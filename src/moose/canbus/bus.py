@@ -13,9 +13,11 @@ is unreachable").
 """
 from __future__ import annotations
 
+import dataclasses
 import errno
 import socket
 import struct
+import threading
 from typing import Any, Callable, Optional
 
 import can
@@ -25,6 +27,8 @@ from can.interfaces.udp_multicast.bus import (
     UdpMulticastBus,
 )
 from can.interfaces.udp_multicast.utils import is_msgpack_installed, unpack_message
+
+from moose.params import check
 
 from .health import BusHealth
 
@@ -93,30 +97,56 @@ class LoopbackMulticastBus(UdpMulticastBus):
         return message, False
 
 
-def is_loopback_group(channel: str) -> bool:
+def is_loopback_group(channel: object) -> bool:
     """An IPv4 multicast group (224.0.0.0/4): what the loopback multicast bus can join."""
+    if not isinstance(channel, str) or channel.count(".") != 3:
+        return False
     try:
-        return 224 <= socket.inet_aton(channel)[0] <= 239 and channel.count(".") == 3
+        return 224 <= socket.inet_aton(channel)[0] <= 239
     except OSError:
         return False
 
 
-def open_bus(interface: str, channel: str, port: Any = None) -> can.BusABC:
-    """Open ``channel`` on ``interface``; a clear error names a wrong interface.
+@dataclasses.dataclass(frozen=True)
+class BusParams:
+    """Which bus to open; every field is checked here, so a bad value is a :class:`ParamError` naming it."""
 
-    ``udp_multicast``: ``channel`` is the IPv4 multicast group (``239.x.y.z``:
-    administratively scoped), ``port`` the UDP port (default 43113); loopback only, see the
-    module doc.
+    interface: str = "udp_multicast"
+    """``socketcan`` (the car), ``udp_multicast`` (processes on this machine) or ``virtual`` (one process)."""
+    channel: str = DEFAULT_GROUP
+    """SocketCAN device, multicast group (IPv4, 224.0.0.0/4; ``239.x.y.z`` is administratively scoped) or
+    virtual channel name."""
+    port: int = DEFAULT_PORT
+    """UDP port of the ``udp_multicast`` bus (1–65535)."""
+
+    def __post_init__(self) -> None:
+        check("interface", self.interface, lambda v: v in INTERFACES, f"one of {list(INTERFACES)}")
+        check("channel", self.channel, lambda v: isinstance(v, str) and v.strip() != "", "a non-empty name")
+        if self.interface == "udp_multicast":
+            check("channel", self.channel, is_loopback_group, "an IPv4 multicast group (224.0.0.0/4)")
+        check("port", self.port, lambda v: isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= 65535,
+              "a UDP port number in 1..65535")
+
+    def open(self) -> can.BusABC:
+        """The python-can bus (``can.CanError`` or ``OSError`` when the interface cannot be opened)."""
+        if self.interface == "socketcan":
+            return can.Bus(interface="socketcan", channel=self.channel, bitrate=BITRATE)
+        if self.interface == "udp_multicast":
+            return LoopbackMulticastBus(self.channel, self.port)
+        return can.Bus(interface="virtual", channel=self.channel, receive_own_messages=False)
+
+
+def open_bus(interface: str, channel: str, port: Any = None) -> can.BusABC:
+    """Open ``channel`` on ``interface`` (``port``: the udp_multicast port, default 43113).
+
+    A bad interface, channel or port raises :class:`ParamError` naming it; an interface that
+    cannot be opened raises ``can.CanError`` or ``OSError``.
     """
-    if interface not in INTERFACES:
-        raise ValueError(f"interface = {interface!r} is invalid: expected one of {list(INTERFACES)}")
-    if interface == "socketcan":
-        return can.Bus(interface="socketcan", channel=channel, bitrate=BITRATE)
-    if interface == "udp_multicast":
-        if not is_loopback_group(channel):
-            raise ValueError(f"channel = {channel!r} is invalid: expected an IPv4 multicast group (224.0.0.0/4)")
-        return LoopbackMulticastBus(channel, int(port) if port is not None else DEFAULT_PORT)
-    return can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+    return BusParams(interface, channel, DEFAULT_PORT if port is None else port).open()
+
+
+SEND_TIMEOUT = 0.005
+"""Longest a send may block (s): half a command period (a full SocketCAN transmit queue raises instead)."""
 
 
 class BusLink:
@@ -125,70 +155,98 @@ class BusLink:
     Any ``can.CanError`` or ``OSError`` from open, send or receive closes the bus object
     (``health.on_io_failure``); the next call after ``health``'s back-off opens it again.
     Error frames are returned with the data frames (the bridge core hands them to ``health``).
+
+    Safe for one sending and one receiving thread: ``lock`` guards the bus object, ``health``
+    and the logger; the socket calls themselves run outside it, so neither thread waits for the
+    other's I/O.
     """
 
-    MAX_FRAMES_PER_POLL = 1000
-
     def __init__(self, opener: Callable[[], can.BusABC], health: BusHealth,
-                 logger: Optional[Callable[[can.Message], Any]] = None) -> None:
+                 logger: Optional[Callable[[can.Message], Any]] = None,
+                 lock: Optional[threading.Lock] = None, send_timeout: float = SEND_TIMEOUT) -> None:
         self.opener = opener
         self.health = health
         self.logger = logger
+        self.lock = lock or threading.Lock()
+        self.send_timeout = send_timeout
         self.bus: Optional[can.BusABC] = None
 
-    def ensure_open(self, t: float) -> bool:
-        if self.bus is not None:
-            return True
-        if self.health.reopen_at is not None and not self.health.reopen_due(t):
-            return False
-        try:
-            self.bus = self.opener()
-        except (can.CanError, OSError) as exc:
-            self.health.on_io_failure(f"open failed: {exc}", t)
-            return False
-        self.health.on_open(t)
-        return True
+    def ensure_open(self, t: float) -> Optional[can.BusABC]:
+        """The open bus, opening it if the back-off allows; ``None`` while it is closed."""
+        with self.lock:
+            if self.bus is not None:
+                return self.bus
+            if self.health.reopen_at is not None and not self.health.reopen_due(t):
+                return None
+            try:
+                self.bus = self.opener()
+            except (can.CanError, OSError) as exc:
+                self.health.on_io_failure(f"open failed: {exc}", t)
+                return None
+            self.health.on_open(t)
+            return self.bus
 
-    def receive(self, t: float) -> list[can.Message]:
-        """Every frame waiting (at most MAX_FRAMES_PER_POLL); [] while the bus is closed."""
+    def receive(self, t: float, limit: int) -> tuple[list[can.Message], bool]:
+        """The frames among up to ``limit`` reads, and whether the limit was reached ([] while the bus is closed).
+
+        A read the bus skipped as malformed (it counts them in ``malformed``, as
+        :class:`LoopbackMulticastBus` does) counts against the limit and does not end the reading.
+        """
         frames: list[can.Message] = []
-        if not self.ensure_open(t):
-            return frames
-        assert self.bus is not None
+        bus = self.ensure_open(t)
+        if bus is None:
+            return frames, False
+        reads = 0
         try:
-            while len(frames) < self.MAX_FRAMES_PER_POLL:
-                frame = self.bus.recv(timeout=0.0)
-                if frame is None:
-                    break
-                frames.append(frame)
-                if self.logger is not None:
-                    self.logger(frame)
+            while reads < limit:
+                skipped = getattr(bus, "malformed", 0)
+                frame = bus.recv(timeout=0.0)
+                reads += 1
+                if frame is not None:
+                    frames.append(frame)
+                elif getattr(bus, "malformed", 0) == skipped:
+                    break  # nothing waiting
         except (can.CanError, OSError, ValueError) as exc:  # ValueError: a closed socket's fileno
-            self._fail(f"receive failed: {exc}", t)
-        return frames
+            self._fail(bus, f"receive failed: {exc}", t)
+        self._log(frames)
+        return frames, reads >= limit
 
     def send(self, frames: list[can.Message], t: float) -> bool:
         """Send ``frames`` in order; False (and the bus closed) on a failure, or while the bus is closed."""
-        if not self.ensure_open(t):
+        bus = self.ensure_open(t)
+        if bus is None:
             return False
-        assert self.bus is not None
+        sent = 0
         try:
             for frame in frames:
-                self.bus.send(frame)
-                if self.logger is not None:
-                    self.logger(frame)
+                bus.send(frame, timeout=self.send_timeout)
+                sent += 1
         except (can.CanError, OSError, ValueError) as exc:
-            self._fail(f"send failed: {exc}", t)
-            return False
-        if frames:
-            self.health.on_traffic(t)
-        return True
+            self._fail(bus, f"send failed: {exc}", t)
+        self._log(frames[:sent])
+        if sent and sent == len(frames):
+            with self.lock:
+                self.health.on_traffic(t)
+        return sent == len(frames)
 
-    def _fail(self, reason: str, t: float) -> None:
-        self.health.on_io_failure(reason, t)
-        self.close()
+    def _log(self, frames: list[can.Message]) -> None:
+        if self.logger is not None and frames:
+            with self.lock:
+                for frame in frames:
+                    self.logger(frame)
+
+    def _fail(self, bus: can.BusABC, reason: str, t: float) -> None:
+        with self.lock:
+            if self.bus is not bus:  # the other thread saw the failure first
+                return
+            self.health.on_io_failure(reason, t)
+            self._close()
 
     def close(self) -> None:
+        with self.lock:
+            self._close()
+
+    def _close(self) -> None:
         if self.bus is not None:
             try:
                 self.bus.shutdown()

@@ -20,11 +20,14 @@ from moose.signals import EpsSample, GpsSample, ImuSample, WheelSpeedSample
 
 from .codec import Codec
 
+ECU_TIMEOUT = 0.05
+"""Command timeout of the vehicle's ECUs (s): five 10 ms command cycles."""
+
 
 class VehicleEcu:
     """Commands in, plant input out; sensor samples in, frames out."""
 
-    def __init__(self, timeout: float = 0.05, codec: Optional[Codec] = None) -> None:
+    def __init__(self, timeout: float = ECU_TIMEOUT, codec: Optional[Codec] = None) -> None:
         if not (isinstance(timeout, (int, float)) and 0.0 < timeout < math.inf):
             raise ValueError(f"timeout = {timeout!r} is invalid: expected a positive number of seconds")
         self.codec = codec or Codec(node="VEHICLE")

@@ -1,73 +1,127 @@
-"""The bridge's command guard: nothing outside the vehicle limits reaches the car.
+"""The bridge's command guard: nothing outside the vehicle's limits reaches the car, and a silent controller ends in a stop.
 
-Whatever arrives on the command topic, :meth:`CommandGuard.output` emits
+**Limits.**  Whatever arrives on the command topic, every output of
+:meth:`CommandGuard.output` (one per command frame, period T_cmd) satisfies
 
-* |δ_cmd| ≤ δ_max and |Δδ_cmd| ≤ δ̇_lim · Δt (the angle reference moves at most at the
-  steering rate limit),
-* |δ̇_cmd| ≤ δ̇_lim for the EPS motor rate command, and no rate towards an end stop the
-  measured angle (EPS_STATUS) has reached: outwards at most (δ_max − |δ_meas|) / cycle,
-* |T| ≤ T_max and |ΔT| ≤ Ṫ_lim · Δt for each rear motor
+* |δ_cmd| ≤ δ_max and |Δδ_cmd| ≤ δ̇_max · T_cmd (the angle reference moves at most at the
+  steering rate),
+* |δ̇_cmd| ≤ δ̇_max for the EPS motor rate command, and no rate towards an end stop the
+  measured angle (EPS_STATUS) has reached: outwards at most (δ_max − |δ_meas|) / T_cmd,
+* |T| ≤ T_max and |ΔT| ≤ Ṫ_max · T_cmd for each rear motor.
 
-(δ_max and T_max from Table I, ``VehicleParams``).  A command with a non-finite field is
-invalid: it discards the held command, so the guard is in the safe state until a valid
-command arrives.  When the newest valid command is older than ``timeout`` the guard emits
-the safe state too: the torques ramped to zero at Ṫ_lim (from T_max in 0.1 s by default)
-and the steering either held (``safe_steering = "hold"``: the last emitted angle, EPS
-rate 0) or returned to straight ahead at δ̇_lim (``"center"``).  The safe state itself
-respects every limit, and a fresh command afterwards is followed from the safe state's
-output, rate-limited.
+The four limits are the vehicle's (:class:`moose.params.VehicleParams`, bounded by
+:data:`moose.params.VEHICLE_LIMITS`): :class:`GuardParams` refuses a looser value, so
+configuration can only tighten them.  The rate limits are per output, not per second of
+the caller's clock, so no clock step can widen them.
+
+**Time.**  The guard ages its inputs in two ways and takes the older: command cycles
+(outputs since the input arrived, times T_cmd) and the caller's clock between outputs,
+counting forward steps only.  A clock that stops or steps back therefore delays a
+timeout by at most one cycle; a forward step or a stalled caller ages the inputs at once.
+An input that arrived since the previous output is always fresh.  The caller passes a
+monotonic time (the bridge runner: ``time.monotonic()``; lockstep simulation: simulated
+time).
+
+**States** (:class:`GuardState`).  ``idle`` until the first valid command: zero torque,
+EPS rate 0, the angle reference at the measured angle.  ``commanding`` while the newest
+valid command is at most ``timeout`` old: the command, limited.  A command with a
+non-finite field is invalid and discards the held command.  When the newest valid command
+is older than ``timeout`` (or was discarded) the guard runs the **minimum-risk maneuver**
+(``minimum_risk``), its targets limited like any command:
+
+* steering back to straight ahead: the angle reference ramps to 0 at δ̇_max, and the EPS
+  rate command is −K_δ · δ_meas (the measured angle, fresh; 0 within ``straight_tolerance``)
+  or the reference's ramp (no fresh measurement), clipped to δ̇_max;
+* braking with the rear motors (regeneration): T = −clip(k_ω · ω̄, ±T_brake) on both
+  wheels, ω̄ the mean measured rear wheel speed.  Both wheels get the same torque (no yaw
+  moment), and the torque falls with the wheel speed, so a rear wheel that starts to lock
+  loses its braking torque instead of staying locked.  Without fresh wheel speeds the
+  target torque is zero (the car coasts: braking blind could reverse it).
+
+Once ω̄ has stayed within ``stop_speed`` for ``stop_time`` the maneuver is complete
+(``stopped``): zero torque, steering centred.  A fresh valid command returns to
+``commanding``, followed from the last output at the rate limits.
 """
 from __future__ import annotations
 
 import dataclasses
+import enum
 import math
+import numbers
 from typing import Optional
 
-from moose.params import ParamError, VehicleParams, check, positive
+from moose.motion import MotionParams
+from moose.params import VEHICLE_LIMITS, ParamError, check
 
-SAFE_STEERING = ("hold", "center")
+from .ecu import ECU_TIMEOUT
+
 _TIME_EPS = 1e-9
-"""Round-off allowance on time differences (s): a command exactly ``timeout`` old is still valid."""
+"""Round-off allowance on ages (s): an input exactly ``timeout`` old is still fresh."""
+
+HARD_LIMIT = {"delta_max": "delta_max", "steer_rate_limit": "delta_rate_max", "torque_max": "T_max",
+              "torque_rate_limit": "torque_rate_max"}
+"""Each limit of the guard and the field of :class:`moose.params.VehicleLimits` that bounds it."""
+
+
+def _positive_finite(value: object) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool) and 0.0 < float(value) < math.inf
 
 
 @dataclasses.dataclass(frozen=True)
 class GuardParams:
-    delta_max: float = VehicleParams().delta_max
-    """Steering angle limit δ_max (rad), Table I."""
-    steer_rate_limit: float = 2.0
-    """Steering rate limit δ̇_lim at the bridge (rad/s), for the angle reference and the EPS rate command.
+    """Limits, timeout and minimum-risk maneuver of the guard (SI units).
 
-    Table I's 2618 rad/s (= 25 000 rpm, plausibly the EPS motor's speed rather than the road
-    wheels') is not a usable bound.  2 rad/s is a fast EPS at the road wheels; the extreme case (7 m/s, τ = 1.4 s) still
-    clears the obstacle by 0.15 m with it (0.04 m at 1 rad/s, 0.27 m unlimited; docs/design.md).
+    Build it with :meth:`from_vehicle` so the limits are the configured vehicle's.
     """
-    torque_max: float = VehicleParams().T_max
-    """Motor torque limit T_max (N m), Table I."""
-    torque_rate_limit: float = 2000.0
-    """Torque rate limit Ṫ_lim (N m/s): 0 → T_max in 0.1 s."""
-    timeout: float = 0.05
-    """Age of the newest valid command after which the safe state is sent (s): five command cycles."""
-    command_period: float = 0.01
-    """Period of the command frames (s); the end-stop look-ahead."""
-    safe_steering: str = "hold"
-    """Steering in the safe state: ``hold`` the last angle, or ramp to ``center`` at the rate limit."""
+
+    delta_max: float = VEHICLE_LIMITS.delta_max
+    """Steering angle limit δ_max (rad); at most the vehicle's hard limit."""
+    steer_rate_limit: float = VEHICLE_LIMITS.delta_rate_max
+    """Steering rate limit δ̇_max (rad/s) of the angle reference and of the EPS rate command; at most the
+    vehicle's road-wheel steering rate."""
+    torque_max: float = VEHICLE_LIMITS.T_max
+    """Motor torque limit T_max (N m); at most the vehicle's hard limit."""
+    torque_rate_limit: float = VEHICLE_LIMITS.torque_rate_max
+    """Torque rate limit Ṫ_max (N m/s); at most the vehicle's hard limit."""
+    timeout: float = ECU_TIMEOUT
+    """Age of the newest valid command after which the minimum-risk maneuver starts (s); at most the
+    vehicle ECUs' own command timeout, so the bridge never keeps a dead controller's command alive longer."""
+    brake_fraction: float = 1.0
+    """T_brake as a share of ``torque_max`` (0, 1]: the largest braking torque per rear motor."""
+    brake_gain: float = 150.0
+    """k_ω (N m per rad/s of mean rear wheel speed).  Below T_brake the car slows exponentially with the
+    time constant m r² / (2 k_ω) ≈ 0.28 s (Table I's m and r)."""
+    stop_speed: float = 0.1
+    """|ω̄| (rad/s) at or below which the car counts as stopped (0.03 m/s at r = 0.301 m)."""
+    stop_time: float = 0.2
+    """How long ω̄ must stay within ``stop_speed`` before the braking torque is released (s)."""
+    eps_gain: float = MotionParams().k_delta
+    """K_δ (1/s) of the steering-back loop: the motion controller's FB-EPS gain."""
+    straight_tolerance: float = 0.005
+    """|δ_meas| (rad) within which the steering counts as straight and the EPS rests (rate 0) instead of
+    chasing the angle sensor's noise (0.3°, five times its standard deviation in ``SensorParams``)."""
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
-            if f.name != "safe_steering":
-                check(f.name, getattr(self, f.name), positive, "a positive number")
-        if self.safe_steering not in SAFE_STEERING:
-            raise ParamError(f"safe_steering = {self.safe_steering!r} is invalid: expected one of {list(SAFE_STEERING)}")
+            check(f.name, getattr(self, f.name), _positive_finite, "a positive finite number")
+        for name, limit_name in HARD_LIMIT.items():
+            limit = getattr(VEHICLE_LIMITS, limit_name)
+            check(name, getattr(self, name), lambda v, limit=limit: v <= limit,
+                  f"at most the vehicle's hard limit {limit_name} = {limit:g} (configuration can only tighten it)")
+        check("timeout", self.timeout, lambda v: v <= ECU_TIMEOUT,
+              f"at most the vehicle ECUs' command timeout {ECU_TIMEOUT:g} s")
+        check("brake_fraction", self.brake_fraction, lambda v: v <= 1.0, "a share of torque_max in (0, 1]")
 
     @property
-    def eps_rate_max(self) -> float:
-        """Limit of the EPS motor rate command (rad/s): the steering rate limit."""
-        return self.steer_rate_limit
+    def brake_torque(self) -> float:
+        """T_brake (N m per rear motor)."""
+        return self.brake_fraction * self.torque_max
 
     @classmethod
-    def from_vehicle(cls, vehicle: VehicleParams, **changes: object) -> "GuardParams":
-        """δ_max and T_max of ``vehicle``; other fields from ``changes`` or the defaults."""
-        return cls(delta_max=vehicle.delta_max, torque_max=vehicle.T_max, **changes)  # type: ignore[arg-type]
+    def from_vehicle(cls, vehicle: object, **changes: object) -> "GuardParams":
+        """The limits of ``vehicle`` (a :class:`~moose.params.VehicleParams`); other fields from ``changes`` or the defaults."""
+        limits = {name: getattr(vehicle, limit_name) for name, limit_name in HARD_LIMIT.items()}
+        return cls(**limits, **changes)  # type: ignore[arg-type]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -83,51 +137,93 @@ class Command:
 
     @property
     def valid(self) -> bool:
+        """Every field a finite real number (not a bool, a string, or an integer too large for a float)."""
         try:
-            return all(math.isfinite(float(v)) for v in dataclasses.astuple(self))
-        except (TypeError, ValueError):
+            return all(isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v)
+                       for v in dataclasses.astuple(self))
+        except (OverflowError, TypeError, ValueError):
             return False
 
 
-SAFE = Command(0.0, 0.0, 0.0, 0.0)
+class GuardState(str, enum.Enum):
+    IDLE = "idle"
+    """No valid command yet: zero torque, steering held."""
+    COMMANDING = "commanding"
+    """Following a fresh valid command."""
+    MINIMUM_RISK = "minimum_risk"
+    """Commands lost: steering back to straight and braking."""
+    STOPPED = "stopped"
+    """The minimum-risk maneuver is complete: stopped, steering centred, zero torque."""
+
+
+class _Arrival:
+    """When an input arrived: the output count before it, and the caller-clock total at the first output after it."""
+
+    __slots__ = ("cycle", "tau")
+
+    def __init__(self, cycle: int) -> None:
+        self.cycle = cycle
+        self.tau: Optional[float] = None
 
 
 class CommandGuard:
-    """Limits, rate limits, end stops and the command timeout; ``output(t)`` is what may be sent at time t."""
+    """Limits, rate limits, end stops, the command timeout and the minimum-risk maneuver.
 
-    def __init__(self, params: GuardParams = GuardParams()) -> None:
+    ``period`` is T_cmd, the period of the command frames (from the DBC); :meth:`output` is called
+    once per command frame.
+    """
+
+    def __init__(self, params: GuardParams = GuardParams(), period: float = 0.01) -> None:
+        check("period", period, _positive_finite, "a positive finite command period (s)")
+        if params.timeout < period:
+            raise ParamError(f"timeout = {params.timeout!r} is invalid: expected at least one command period "
+                             f"({period:g} s)")
         self.params = params
-        self._latest: Optional[Command] = None
-        self._received = -math.inf
-        self._out = SAFE
-        self._t_out: Optional[float] = None
-        self._measured: Optional[tuple[float, float]] = None
-        self._invalid_latched = False
+        self.period = float(period)
+        self.state = GuardState.IDLE
         self.clamped = False
         """A limit, rate limit or end stop changed the last output."""
-        self.timed_out = True
-        """The last output was the safe state (no valid command, or the newest one too old)."""
         self.invalid = 0
-        """Invalid (non-finite) commands received."""
+        """Invalid (non-finite or non-numeric) commands received."""
+        self._latest: Optional[Command] = None
+        self._command: Optional[_Arrival] = None
+        self._angle: Optional[tuple[_Arrival, float]] = None
+        self._wheels: Optional[tuple[_Arrival, float]] = None
+        self._invalid_latched = False
+        self._out = Command(0.0, 0.0, 0.0, 0.0)
+        self._cycle = 0
+        self._tau = 0.0
+        self._t_last: Optional[float] = None
+        self._still = 0
+        """Consecutive outputs with fresh wheel speeds within ``stop_speed``."""
 
-    def receive(self, command: Command, t: float) -> None:
-        """A command from the motion controller, received at ``t``."""
+    @property
+    def timed_out(self) -> bool:
+        """The last output was not a command being followed (idle, minimum-risk maneuver or stopped)."""
+        return self.state != GuardState.COMMANDING
+
+    def receive(self, command: Command) -> None:
+        """A command from the motion controller; the newest one counts, whatever the clock says."""
         if not command.valid:
             self.invalid += 1
             self._invalid_latched = True
-            self._latest = None
+            self._latest = self._command = None
             return
-        if t >= self._received:
-            self._latest = Command(*(float(v) for v in dataclasses.astuple(command)))
-            self._received = t
+        self._latest = Command(*(float(v) for v in dataclasses.astuple(command)))
+        self._command = _Arrival(self._cycle)
 
-    def observe_angle(self, delta: float, t: float) -> None:
-        """The steering angle the EPS measured (EPS_STATUS) at ``t``: end stops, and the initial angle to hold."""
-        if not math.isfinite(delta) or not math.isfinite(t):
+    def observe_angle(self, delta: float) -> None:
+        """The steering angle the EPS measured (EPS_STATUS): end stops, steering back, and the angle to hold when idle."""
+        if not _finite(delta):
             return
-        self._measured = (t, delta)
-        if self._t_out is None:
-            self._out = dataclasses.replace(self._out, steering_angle=_clip(delta, self.params.delta_max))
+        self._angle = (_Arrival(self._cycle), float(delta))
+        if self._cycle == 0:  # the first output starts from the measured angle
+            self._out = dataclasses.replace(self._out, steering_angle=_clip(float(delta), self.params.delta_max))
+
+    def observe_wheel_speeds(self, omega_rl: float, omega_rr: float) -> None:
+        """The rear wheel speeds (WHEEL_SPEEDS): braking in the minimum-risk maneuver."""
+        if _finite(omega_rl) and _finite(omega_rr):
+            self._wheels = (_Arrival(self._cycle), 0.5 * (float(omega_rl) + float(omega_rr)))
 
     def pop_invalid(self) -> bool:
         """An invalid command since the previous call (the status frame's flag)."""
@@ -135,42 +231,98 @@ class CommandGuard:
         return flag
 
     def output(self, t: float) -> Command:
-        p = self.params
-        dt = 0.0 if self._t_out is None else max(t - self._t_out, 0.0)
-        self._t_out = t
+        """The command frame's content at ``t`` (the caller's monotonic time)."""
+        self._advance(t)
         old = self._out
-        self.timed_out = self._latest is None or t - self._received > p.timeout + _TIME_EPS
-        torque_step = p.torque_rate_limit * dt
-        angle_step = p.steer_rate_limit * dt
-        if self.timed_out:
-            if p.safe_steering == "center":
-                angle = old.steering_angle - _clip(old.steering_angle, angle_step)
-                rate = (angle - old.steering_angle) / dt if dt > 0.0 else 0.0
+        if self._latest is not None and self._fresh(self._command):
+            self.state = GuardState.COMMANDING
+            self._still = 0
+            want = self._latest
+            out = self._limit(want, old)
+            self.clamped = out != want
+        else:
+            self._latest = self._command = None
+            if self.state == GuardState.COMMANDING:
+                self.state = GuardState.MINIMUM_RISK
+            if self.state == GuardState.IDLE:
+                measured = self._measured_angle()
+                target = Command(old.steering_angle if measured is None else measured, 0.0, 0.0, 0.0)
             else:
-                angle, rate = old.steering_angle, 0.0
-            rate = self._end_stop(_clip(rate, p.steer_rate_limit), t)
-            self._out = Command(angle, rate, old.torque_rl - _clip(old.torque_rl, torque_step),
-                                old.torque_rr - _clip(old.torque_rr, torque_step))
+                target = self._minimum_risk(old)
+            out = self._limit(target, old)
             self.clamped = False
-            return self._out
-        want = self._latest
-        assert want is not None
-        angle = old.steering_angle + _clip(_clip(want.steering_angle, p.delta_max) - old.steering_angle, angle_step)
-        torques = [o + _clip(_clip(w, p.torque_max) - o, torque_step)
-                   for w, o in ((want.torque_rl, old.torque_rl), (want.torque_rr, old.torque_rr))]
-        rate = self._end_stop(_clip(want.steering_rate, p.steer_rate_limit), t)
-        out = Command(angle, rate, torques[0], torques[1])
-        self.clamped = out != want
         self._out = out
         return out
 
-    def _end_stop(self, rate: float, t: float) -> float:
+    # -- internals ------------------------------------------------------------------------
+
+    def _advance(self, t: float) -> None:
+        """One output: count the cycle, add the caller clock's forward step, date the inputs that arrived."""
+        self._cycle += 1
+        if _finite(t):
+            if self._t_last is not None and t > self._t_last:
+                self._tau += t - self._t_last
+            self._t_last = float(t)
+        for arrival in (self._command, self._angle and self._angle[0], self._wheels and self._wheels[0]):
+            if arrival is not None and arrival.tau is None:
+                arrival.tau = self._tau
+
+    def _age(self, arrival: _Arrival) -> float:
+        """Age of an input (s): the larger of the cycle count and the caller clock's forward steps."""
+        assert arrival.tau is not None
+        return max((self._cycle - arrival.cycle - 1) * self.period, self._tau - arrival.tau)
+
+    def _fresh(self, arrival: Optional[_Arrival]) -> bool:
+        return arrival is not None and self._age(arrival) <= self.params.timeout + _TIME_EPS
+
+    def _measured_angle(self) -> Optional[float]:
+        return self._angle[1] if self._angle is not None and self._fresh(self._angle[0]) else None
+
+    def _minimum_risk(self, old: Command) -> Command:
+        p = self.params
+        angle = old.steering_angle - _clip(old.steering_angle, p.steer_rate_limit * self.period)
+        measured = self._measured_angle()
+        if measured is None:
+            rate = (angle - old.steering_angle) / self.period
+        else:
+            rate = 0.0 if abs(measured) <= p.straight_tolerance else -p.eps_gain * measured
+        torque = 0.0
+        wheels = self._wheels
+        if not (wheels is not None and self._fresh(wheels[0])):
+            self._still = 0
+        elif self.state == GuardState.MINIMUM_RISK:
+            omega = wheels[1]
+            self._still = self._still + 1 if abs(omega) <= p.stop_speed else 0
+            if self._still * self.period >= p.stop_time - _TIME_EPS:
+                self.state = GuardState.STOPPED
+            else:
+                torque = -_clip(p.brake_gain * omega, p.brake_torque)
+        return Command(angle, rate, torque, torque)
+
+    def _limit(self, want: Command, old: Command) -> Command:
+        """``want`` clipped to the limits, rate-limited from ``old`` over one command period, end stops applied."""
+        p, dt = self.params, self.period
+        angle = old.steering_angle + _clip(_clip(want.steering_angle, p.delta_max) - old.steering_angle,
+                                           p.steer_rate_limit * dt)
+        torques = [o + _clip(_clip(w, p.torque_max) - o, p.torque_rate_limit * dt)
+                   for w, o in ((want.torque_rl, old.torque_rl), (want.torque_rr, old.torque_rr))]
+        rate = self._end_stop(_clip(want.steering_rate, p.steer_rate_limit))
+        return Command(angle, rate, torques[0], torques[1])
+
+    def _end_stop(self, rate: float) -> float:
         """No EPS rate that would carry the measured angle past ±δ_max within one command period."""
-        if self._measured is None or t - self._measured[0] > self.params.timeout + _TIME_EPS:
+        delta = self._measured_angle()
+        if delta is None:
             return rate
-        delta, p = self._measured[1], self.params
-        return min(max(rate, -max(p.delta_max + delta, 0.0) / p.command_period),
-                   max(p.delta_max - delta, 0.0) / p.command_period)
+        p = self.params
+        return min(max(rate, -max(p.delta_max + delta, 0.0) / self.period), max(p.delta_max - delta, 0.0) / self.period)
+
+
+def _finite(value: object) -> bool:
+    try:
+        return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
+    except OverflowError:
+        return False
 
 
 def _clip(value: float, bound: float) -> float:

@@ -64,6 +64,7 @@ def run(name: str, argv: Sequence[str] = ()) -> int:
         pass
     finally:
         node.message = "stopped"
+        node.close()
         rt.shutdown()
     return 0
 

@@ -27,6 +27,9 @@ class GraphNode:
         self.level, self.message, self.values = OK, "running", {}
         rt.timer(1.0, self.publish_diagnostics)
 
+    def close(self) -> None:
+        """Release what the node holds beyond its runtime entities (a bus, a thread); called once at shutdown."""
+
     def publish_diagnostics(self) -> None:
         self._diag(cv.diagnostic_to_msg(self.rt, self.rt.now(), self.name, self.level, self.message, self.values))
 
