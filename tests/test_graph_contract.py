@@ -21,7 +21,7 @@ from moose_ros.runtime import DdsNode
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "ros2_ws" / "src" / "moose_ros"
-TOPIC_LITERAL = re.compile(r"""["'](/(?:clock|diagnostics|vehicle/\w+|perception/\w+|planning/\w+|control/\w+))["']""")
+TOPIC_LITERAL = re.compile(r"""["'](/(?:clock|diagnostics|tf|tf_static|vehicle/\w+|perception/\w+|planning/\w+|control/\w+))["']""")
 
 
 def test_topic_names_are_written_once_in_the_package() -> None:

@@ -20,7 +20,8 @@ STANDARD = ["nav_msgs/msg/Odometry", "sensor_msgs/msg/Imu", "diagnostic_msgs/msg
             "rosgraph_msgs/msg/Clock", "std_msgs/msg/Header", "builtin_interfaces/msg/Time",
             "geometry_msgs/msg/PoseWithCovariance", "geometry_msgs/msg/TwistWithCovariance",
             "rmw_dds_common/msg/ParticipantEntitiesInfo", "rmw_dds_common/msg/NodeEntitiesInfo",
-            "rmw_dds_common/msg/Gid"]
+            "rmw_dds_common/msg/Gid", "tf2_msgs/msg/TFMessage", "geometry_msgs/msg/TransformStamped",
+            "visualization_msgs/msg/MarkerArray", "visualization_msgs/msg/Marker", "geometry_msgs/msg/Point"]
 
 
 def fill(type_name: str, seed: int) -> Any:

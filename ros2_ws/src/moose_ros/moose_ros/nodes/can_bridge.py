@@ -36,7 +36,7 @@ class CanBridge(GraphNode):
         self.reopen_at = 0.0
         self.open()
         self.logger = can.Logger(self.params.can_log) if self.params.can_log else None
-        self.pub = sensor_publishers(rt)
+        self.pub = sensor_publishers(rt, rt.now())
         ACTUATOR_COMMAND.subscription(rt, self.on_command)
         rt.timer(0.01, self.tick)
 
