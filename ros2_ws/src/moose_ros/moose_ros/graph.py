@@ -122,6 +122,18 @@ class Topic:
         """A subscription to this topic on runtime node ``rt``, with the subscribers' QoS."""
         return rt.subscription(self.type, self.name, callback, self.subscription_qos)
 
+    @property
+    def tool_qos(self) -> Qos:
+        """What tools that must not miss a sample request (the launcher's monitor, the bag recorder): the
+        publishers' reliability and durability, as rosbag2 adapts its request to the offers, and a keep-last
+        depth of at least 100 (a latched topic keeps one sample per writer)."""
+        base = self.subscription_qos if self.qos.transient_local else self.qos
+        return Qos(reliable=self.qos.reliable, depth=max(base.depth, 100), transient_local=self.qos.transient_local)
+
+    def tool_subscription(self, rt: Any, callback: Callable[[Any], None]) -> Any:
+        """A subscription of a tool (monitor, recorder) with :attr:`tool_qos`."""
+        return rt.subscription(self.type, self.name, callback, self.tool_qos)
+
 
 QOS_TF = Qos(reliable=True, depth=100)
 """tf2's TransformBroadcaster and TransformListener: reliable, volatile, keep last 100."""

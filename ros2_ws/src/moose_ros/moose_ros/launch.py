@@ -34,6 +34,7 @@ from moose.simulation import SimulationResult
 
 from . import convert as cv
 from .bag import Recorder
+from .bag.params import RunParameters
 from .graph import BLEND, DIAGNOSTICS, GRAPHS, ODOM, PLAN_MPC, STEERING, THREAT
 from .parameters import check_parameter_file, node_parameters, parameter_names
 from .runtime import DdsNode
@@ -55,13 +56,13 @@ class Monitor:
     diagnostics: dict = dataclasses.field(default_factory=dict)
     finished: bool = False
 
-    def attach(self, node: DdsNode) -> None:
-        ODOM.subscription(node, self.on_odom)
-        STEERING.subscription(node, lambda m: setattr(self, "delta", m.delta))
-        PLAN_MPC.subscription(node, self.on_mpc)
-        BLEND.subscription(node, lambda m: self.weights.__setitem__(cv.time_of(m), m.weight_mpc))
-        THREAT.subscription(node, self.on_threat)
-        DIAGNOSTICS.subscription(node, self.on_diagnostics)
+    def attach(self, node: DdsNode) -> None:  # a tool that must not miss a sample (graph.Topic.tool_qos)
+        ODOM.tool_subscription(node, self.on_odom)
+        STEERING.tool_subscription(node, lambda m: setattr(self, "delta", m.delta))
+        PLAN_MPC.tool_subscription(node, self.on_mpc)
+        BLEND.tool_subscription(node, lambda m: self.weights.__setitem__(cv.time_of(m), m.weight_mpc))
+        THREAT.tool_subscription(node, self.on_threat)
+        DIAGNOSTICS.tool_subscription(node, self.on_diagnostics)
 
     def on_odom(self, m: Any) -> None:
         p, q, v = m.pose.pose.position, m.pose.pose.orientation, m.twist.twist.linear
@@ -171,7 +172,8 @@ def launch(
     node = DdsNode("moose_monitor", overrides={"use_sim_time": False})
     monitor.attach(node)
     try:
-        recorder = Recorder(node, bag) if bag is not None else None  # an unusable path stops the launch here
+        run = RunParameters(monitor.config, scenario, planner, seed)  # kept in the bag (moose bag replan uses it)
+        recorder = Recorder(node, bag, parameters=run) if bag is not None else None  # an unusable path stops here
     except Exception:
         node.shutdown()
         raise
