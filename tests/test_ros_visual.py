@@ -94,3 +94,53 @@ def test_blend_path_of_the_msf_alone_is_the_msf_prediction() -> None:
     e = StateEstimate(1.0, 3.0, -0.5, 0.1, 6.0, 0.3, 0.0, 0.0)
     msf = _plan(np.array([e.x, e.y, e.vX, e.vY]), np.random.default_rng(1).uniform(-3, 3, (10, 2)))
     np.testing.assert_allclose(blend_path(Blend(0.0, msf.accel), e, 0.2), msf.predicted, atol=1e-12)
+
+
+LAYOUT = __import__("pathlib").Path(__file__).resolve().parents[1] / "config" / "foxglove_layout.json"
+
+
+def _field_type(type_name: str, fields: list[str]) -> str:
+    """The type at ``fields`` inside ``type_name`` (``BASE:float64`` for a base field); KeyError if absent."""
+    from rosbags.interfaces import Nodetype
+
+    for i, name in enumerate(fields):
+        node = dict(typestore().fielddefs[type_name][1])[name]
+        if node[0] == Nodetype.NAME:
+            type_name = node[1]
+        elif node[0] == Nodetype.BASE and i == len(fields) - 1:
+            return f"BASE:{node[1][0]}"
+        else:
+            raise KeyError(f"{name} of {type_name} is not a message or a scalar")
+    return type_name
+
+
+def test_foxglove_layout_names_only_what_the_graph_publishes() -> None:
+    """Every panel of config/foxglove_layout.json is placed, and every topic, field and frame it names exists in
+    the graph contract and the message definitions (a misspelt path would leave a plot empty)."""
+    import json
+
+    from moose_ros.graph import DIAGNOSTICS, FRAME_BASE, FRAME_ODOM, FRAME_TRUTH, MARKERS, TOPICS
+
+    layout = json.loads(LAYOUT.read_text(encoding="utf-8"))
+    config = layout["configById"]
+
+    def placed(node):  # type: ignore[no-untyped-def]
+        return {node} if isinstance(node, str) else placed(node["first"]) | placed(node["second"])
+
+    assert placed(layout["layout"]) == set(config)
+    kinds = {panel.split("!")[0] for panel in config}
+    assert {"3D", "Plot", "DiagnosticSummary"} <= kinds
+    three_d = config["3D!moose"]
+    assert three_d["topics"][MARKERS.name]["visible"] and set(three_d["topics"]) <= set(TOPICS)
+    assert {f"frame:{f}" for f in (FRAME_ODOM, FRAME_BASE, FRAME_TRUTH)} <= set(three_d["transforms"])
+    assert config["DiagnosticSummary!moose"]["topicToRender"] == DIAGNOSTICS.name
+    plotted = []
+    for panel, cfg in config.items():
+        if panel.startswith("Plot!"):
+            for p in cfg["paths"]:
+                topic, *fields = p["value"].split(".")
+                assert _field_type(TOPICS[topic].type, fields).startswith("BASE:float"), p["value"]
+                plotted.append(p["value"])
+    for wanted in ("/vehicle/steering.delta", "/planning/blend.delta_mpc", "/control/reference.vx_ref",
+                   "/planning/blend.weight_mpc", "/perception/threat.tau", "/perception/threat.nu"):
+        assert wanted in plotted  # δ vs δ_MPC, v vs v_ref, w_MPC, τ/ν

@@ -102,12 +102,13 @@ def plan_from_msg(msg: Any) -> PlanResult:
     return PlanResult(accel, STATUS_NAMES[int(msg.status)], int(msg.iterations), msg.solve_time, cost, predicted)  # type: ignore[arg-type]
 
 
-def blend_to_msg(node: Any, t: float, blend: Blend, reference: Reference) -> Any:
+def blend_to_msg(node: Any, t: float, blend: Blend, reference: Reference, delta_mpc: float = math.nan) -> Any:
+    """The blend of a planning instant, its FBL reference and δ_MPC (``PlanningRecord.delta_mpc``)."""
     msg = node.make("moose_msgs/msg/Blend")
     stamp(msg, t)
     msg.weight_mpc = float(blend.weight_mpc)
     msg.accel_x, msg.accel_y = [float(v) for v in blend.accel[:, 0]], [float(v) for v in blend.accel[:, 1]]
-    msg.delta_ref, msg.vx_ref = reference.delta, reference.vx
+    msg.delta_ref, msg.vx_ref, msg.delta_mpc = reference.delta, reference.vx, float(delta_mpc)
     return msg
 
 

@@ -144,8 +144,8 @@ _ALL = tuple(NODES)
 CLOCK = Topic(CLOCK_TOPIC, CLOCK_TYPE, QOS_CLOCK, "100 Hz", 100.0, ("vehicle_simulator",),
               tuple(n for n in _ALL if n != "vehicle_simulator"), "simulated time (use_sim_time)",
               reader_qos=QOS_CLOCK_READER)
-ODOM = Topic("/vehicle/odom", "nav_msgs/msg/Odometry", QOS_SENSOR_PUBLISHER, "100 Hz", 100.0, ("vehicle_simulator",), (),
-             "odom → base_link_truth, ground truth", reader_qos=QOS_SENSOR)
+ODOM = Topic("/vehicle/odom", "nav_msgs/msg/Odometry", QOS_SENSOR_PUBLISHER, "100 Hz", 100.0, ("vehicle_simulator",),
+             (), "odom → base_link_truth, ground truth", reader_qos=QOS_SENSOR)
 IMU = Topic("/vehicle/imu", "sensor_msgs/msg/Imu", QOS_SENSOR_PUBLISHER, "100 Hz", 100.0, SENSOR_SOURCES, ("observer",),
             "frame imu; a_x, a_y, γ", reader_qos=QOS_SENSOR)
 GPS = Topic("/vehicle/gps", "nav_msgs/msg/Odometry", QOS_SENSOR_PUBLISHER, "1 Hz", 1.0, SENSOR_SOURCES, ("observer",),
@@ -166,7 +166,7 @@ PLAN_MPC = Topic("/planning/mpc", "moose_msgs/msg/PlannerOutput", QOS_DEFAULT, "
 PLAN_MSF = Topic("/planning/msf", "moose_msgs/msg/PlannerOutput", QOS_DEFAULT, "5 Hz + on a new obstacle", 5.0,
                  ("msf_planner",), ("weight_fbl",), "planned accelerations, status")
 BLEND = Topic("/planning/blend", "moose_msgs/msg/Blend", QOS_DEFAULT, "5 Hz", 5.0, ("weight_fbl",),
-              ("mpc_planner",), "w_MPC and the blended plan: the MPC's next initial guess")
+              ("mpc_planner",), "w_MPC, the blended plan (the MPC's next initial guess), δ*, δ_MPC")
 REFERENCE = Topic("/control/reference", "moose_msgs/msg/Reference", QOS_DEFAULT,
                   "100 Hz (δ* re-evaluated per estimate)", 100.0, ("weight_fbl",), ("motion_controller",), "δ*, v_x*")
 ACTUATOR_COMMAND = Topic("/control/actuator_command", "moose_msgs/msg/ActuatorCommand", QOS_DEFAULT,

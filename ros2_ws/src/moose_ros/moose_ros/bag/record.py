@@ -101,7 +101,8 @@ def record_result(result: Any, path: str | Path) -> dict[str, int]:
         for kind, plan in (("mpc", record.mpc), ("msf", record.msf)):
             if plan is not None:
                 add(record.t, PLANS[kind].name, cv.plan_to_msg(factory, record.t, kind, plan))
-        add(record.t, BLEND.name, cv.blend_to_msg(factory, record.t, record.blend, record.reference))
+        add(record.t, BLEND.name, cv.blend_to_msg(factory, record.t, record.blend, record.reference,
+                                                     record.delta_mpc))
         estimate = result.estimates[int(round(record.t * result.config.simulation.motion_rate_hz))]  # one per tick
         path_ = blend_path(record.blend, estimate, result.config.grid.t_s)
         add(record.t, MARKERS.name, cv.markers_to_msg(factory, record.t, record.threat, record.mpc, record.msf, path_))

@@ -66,7 +66,7 @@ class WeightFbl(GraphNode):
         self.level, self.message = (WARN, "mpc_planner silent: MSF only") if silent else (OK, "running")
         self.pending.clear()
         self.values = {"weight_mpc": f"{record.blend.weight_mpc:.3f}"}
-        self.pub_blend(cv.blend_to_msg(self.rt, t, record.blend, record.reference))
+        self.pub_blend(cv.blend_to_msg(self.rt, t, record.blend, record.reference, record.delta_mpc))
         self.pub_ref(cv.reference_to_msg(self.rt, t, record.reference))
         self.pub_markers(cv.markers_to_msg(self.rt, t, record.threat, record.mpc, record.msf,
                                            blend_path(record.blend, self.estimate, self.step.grid.t_s)))
