@@ -93,3 +93,24 @@ def test_replan_uses_the_runs_parameters(bag: Path) -> None:
         assert summary["rms_ay"] < 0.5
     default = replan(bag, load_config())["summary"]  # the default configuration's road is another one
     assert default["parameters"] == "given" and default["road_mu"] != run.config.vehicle.mu
+
+
+def test_birdseye_view_draws_a_shipped_bag_and_refuses_one_without_markers(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    from moose_ros.bag import BagError, BagWriter, plot_birdseye, read_bag
+    from moose_ros.interfaces import from_rosbags
+
+    out = plot_birdseye(BAGS[0], tmp_path / "view.png")
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    odom_only = tmp_path / "odom_only"
+    writer = BagWriter(odom_only)
+    for m in read_bag(BAGS[0], ["/vehicle/odom"]):
+        writer.write(m.topic, m.type_name, m.timestamp_ns, bytes(from_rosbags(m.msg, m.type_name).serialize()))
+    writer.close()
+    with pytest.raises(BagError, match="/planning/markers"):
+        plot_birdseye(odom_only, tmp_path / "none.png")
+    cli = subprocess.run([sys.executable, "-m", "moose.cli", "bag", "view", str(odom_only), "-o", str(tmp_path / "x.png")],
+                         capture_output=True, text=True, timeout=60)
+    assert cli.returncode == 2 and cli.stderr.startswith("moose: error:") and "Traceback" not in cli.stderr

@@ -39,7 +39,10 @@ def add_subparser(subparsers: Any) -> None:
                         "kept in the bag)")
     replan.add_argument("--v-des", type=positive_float, help="desired speed (default: the run's scenario)")
     replan.add_argument("--plot", help="write recorded vs re-computed references (PNG)")
-    for parser_ in (record, play, info, export, replan):
+    view = bag_sub.add_parser("view", help="bird's-eye view: path, danger zone, predicted paths (PNG)")
+    view.add_argument("path")
+    view.add_argument("-o", "--output", required=True, help="PNG to write")
+    for parser_ in (record, play, info, export, replan, view):
         parser_.set_defaults(func=cmd_bag)
 
 
@@ -72,6 +75,8 @@ def cmd_bag(args: argparse.Namespace) -> int:
             print(json.dumps(summary, indent=2))
             if args.plot:
                 print(f"figure {bag.plot_replan(result['rows'], args.plot)}")
+        elif args.bag_command == "view":
+            print(f"figure {bag.plot_birdseye(args.path, args.output)}")
         elif args.bag_command == "record":
             return _record(bag, args)
         elif args.bag_command == "play":
