@@ -5,7 +5,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: run test bench clean ros
+.PHONY: run test bench clean ros bags
 
 $(STAMP): pyproject.toml ros2_ws/src/moose_ros/setup.py
 	$(PYTHON) -m venv $(VENV)
@@ -31,3 +31,10 @@ ros:
 
 clean:
 	rm -rf $(VENV) .venv-ros runs
+
+# The example bags of bags/ (README there): two lockstep runs and one run of the node graph.
+bags: $(STAMP)
+	rm -rf bags/paper_v7_tau1.4_combined bags/paper_v5_tau3_combined bags/paper_v7_tau1.4_combined_graph
+	$(BIN)/moose simulate --scenario paper_v7_tau1.4 --bag bags/paper_v7_tau1.4_combined
+	$(BIN)/moose simulate --scenario paper_v5_tau3 --bag bags/paper_v5_tau3_combined
+	$(BIN)/moose launch --scenario paper_v7_tau1.4 --bag bags/paper_v7_tau1.4_combined_graph

@@ -21,7 +21,7 @@ from moose_ros.runtime import DdsNode
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "ros2_ws" / "src" / "moose_ros"
-TOPIC_LITERAL = re.compile(r"""["'](/(?:clock|diagnostics|vehicle/\w+|perception/\w+|planning/\w+|control/\w+))["']""")
+TOPIC_LITERAL = re.compile(r"""["'](/(?:clock|diagnostics|tf|tf_static|vehicle/\w+|perception/\w+|planning/\w+|control/\w+))["']""")
 
 
 def test_topic_names_are_written_once_in_the_package() -> None:
@@ -56,12 +56,13 @@ def _node_endpoints(name: str, tmp_path: Path) -> set[tuple[str, str, str, objec
     if name in ("obstacle_detector", "weight_fbl", "motion_controller"):
         overrides.pop("scenario")
     rt = DdsNode(name, overrides=overrides)
+    node = None
     try:
         node = node_class(name)(rt)
-        if name == "can_bridge":
-            node.bus.shutdown()
         return {(e.kind, e.topic, e.type, e.qos) for e in rt.endpoints()}
     finally:
+        if node is not None:
+            node.close()
         rt.shutdown()
 
 

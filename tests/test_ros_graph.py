@@ -129,7 +129,7 @@ def test_plain_cyclone_reader_receives_odometry_from_another_process() -> None:
         proc.wait()
     assert len(samples) >= 90  # reliable QoS on loopback: (nearly) all 100 arrive
     last = samples[-1]
-    assert last.header.frame_id == "odom" and last.child_frame_id == "base_link"
+    assert last.header.frame_id == "odom" and last.child_frame_id == "base_link_truth"  # ground truth (REP-105 frames)
     assert last.pose.pose.position.y == 2.0 and last.twist.twist.linear.x == 7.0
     assert last.pose.pose.orientation.z == pytest.approx(0.14943813)  # sin(0.15)
     assert [s.pose.pose.position.x for s in samples] == sorted(s.pose.pose.position.x for s in samples)

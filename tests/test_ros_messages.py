@@ -18,7 +18,10 @@ OURS = sorted(f"moose_msgs/msg/{p.stem}" for p in msg_dir().glob("*.msg"))
 STANDARD = ["nav_msgs/msg/Odometry", "sensor_msgs/msg/Imu", "diagnostic_msgs/msg/DiagnosticArray",
             "diagnostic_msgs/msg/DiagnosticStatus", "diagnostic_msgs/msg/KeyValue",
             "rosgraph_msgs/msg/Clock", "std_msgs/msg/Header", "builtin_interfaces/msg/Time",
-            "geometry_msgs/msg/PoseWithCovariance", "geometry_msgs/msg/TwistWithCovariance"]
+            "geometry_msgs/msg/PoseWithCovariance", "geometry_msgs/msg/TwistWithCovariance",
+            "rmw_dds_common/msg/ParticipantEntitiesInfo", "rmw_dds_common/msg/NodeEntitiesInfo",
+            "rmw_dds_common/msg/Gid", "tf2_msgs/msg/TFMessage", "geometry_msgs/msg/TransformStamped",
+            "visualization_msgs/msg/MarkerArray", "visualization_msgs/msg/Marker", "geometry_msgs/msg/Point"]
 
 
 def fill(type_name: str, seed: int) -> Any:

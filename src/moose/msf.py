@@ -48,22 +48,9 @@ from typing import Optional
 import numpy as np
 
 from .maneuver import MaxSteeringTable
+from .planning import zoh_rollout
 from .schema import MsfParams, PlanningGrid
 from .signals import Obstacle, PlannerInput, PlanResult
-
-
-def zoh_rollout(state: np.ndarray, accel: np.ndarray, t_s: float) -> np.ndarray:
-    """eq. (skin) with exact zero-order hold: (N + 1, 4) states [x, y, v_X, v_Y] from (N, 2) accelerations.
-
-    p⁺ = p + t_s v + t_s²/2 a,  v⁺ = v + t_s a (exact for a double integrator).
-    """
-    state = np.asarray(state, dtype=float)
-    accel = np.asarray(accel, dtype=float).reshape(-1, 2)
-    out = np.empty((len(accel) + 1, 4))
-    out[0] = state
-    out[1:, 2:] = state[2:] + t_s * np.cumsum(accel, axis=0)
-    out[1:, :2] = state[:2] + np.cumsum(t_s * out[:-1, 2:] + 0.5 * t_s**2 * accel, axis=0)
-    return out
 
 
 def _quintic(left: tuple[float, float, float], right: tuple[float, float, float], length: float,

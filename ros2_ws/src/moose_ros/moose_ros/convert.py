@@ -14,13 +14,15 @@ from moose.signals import (
     Blend, EpsSample, GpsSample, ImuSample, Obstacle, PlanResult, Reference, StateEstimate, Threat, WheelSpeedSample,
 )
 
-from .graph import GPS, IMU, STEERING, WHEEL_SPEEDS, Topic
+from .graph import (
+    FRAME_BASE, FRAME_GPS, FRAME_IMU, FRAME_ODOM, FRAME_TRUTH, GPS, IMU, SENSOR_MOUNTS, STEERING, WHEEL_SPEEDS, Topic,
+)
 
 STATUS_CODES = {"converged": 0, "capped": 1, "failed": 2, "over_budget": 3, "ok": 4, "idle": 5}
 STATUS_NAMES = {code: name for name, code in STATUS_CODES.items()}
 
 
-def stamp(msg: Any, t: float, frame: str = "odom") -> None:
+def stamp(msg: Any, t: float, frame: str = FRAME_ODOM) -> None:
     """Set ``msg.header`` to time ``t`` (s) and ``frame``."""
     sec = math.floor(t)
     msg.header.stamp.sec = int(sec)
@@ -100,12 +102,13 @@ def plan_from_msg(msg: Any) -> PlanResult:
     return PlanResult(accel, STATUS_NAMES[int(msg.status)], int(msg.iterations), msg.solve_time, cost, predicted)  # type: ignore[arg-type]
 
 
-def blend_to_msg(node: Any, t: float, blend: Blend, reference: Reference) -> Any:
+def blend_to_msg(node: Any, t: float, blend: Blend, reference: Reference, delta_mpc: float = math.nan) -> Any:
+    """The blend of a planning instant, its FBL reference and δ_MPC (``PlanningRecord.delta_mpc``)."""
     msg = node.make("moose_msgs/msg/Blend")
     stamp(msg, t)
     msg.weight_mpc = float(blend.weight_mpc)
     msg.accel_x, msg.accel_y = [float(v) for v in blend.accel[:, 0]], [float(v) for v in blend.accel[:, 1]]
-    msg.delta_ref, msg.vx_ref = reference.delta, reference.vx
+    msg.delta_ref, msg.vx_ref, msg.delta_mpc = reference.delta, reference.vx, float(delta_mpc)
     return msg
 
 
@@ -126,7 +129,7 @@ def reference_from_msg(msg: Any) -> Reference:
 
 def imu_to_msg(node: Any, s: ImuSample) -> Any:
     msg = node.make("sensor_msgs/msg/Imu")
-    stamp(msg, s.t, "base_link")
+    stamp(msg, s.t, FRAME_IMU)
     msg.orientation_covariance = [-1.0] + [0.0] * 8  # no orientation estimate (REP-145)
     msg.angular_velocity.z = s.yaw_rate
     msg.linear_acceleration.x, msg.linear_acceleration.y = s.ax, s.ay
@@ -140,8 +143,8 @@ def imu_from_msg(msg: Any) -> ImuSample:
 def gps_to_msg(node: Any, s: GpsSample) -> Any:
     """A GPS fix as a local-frame Odometry stamped with its measurement time."""
     msg = node.make("nav_msgs/msg/Odometry")
-    stamp(msg, s.t_measured)
-    msg.child_frame_id = "gps"
+    stamp(msg, s.t_measured, FRAME_ODOM)
+    msg.child_frame_id = FRAME_GPS
     msg.pose.pose.position.x, msg.pose.pose.position.y = s.x, s.y
     msg.twist.twist.linear.x, msg.twist.twist.linear.y = s.vX, s.vY  # in odom axes
     return msg
@@ -155,7 +158,7 @@ def gps_from_msg(msg: Any, t_received: float) -> GpsSample:
 
 def wheels_to_msg(node: Any, s: WheelSpeedSample) -> Any:
     msg = node.make("moose_msgs/msg/WheelSpeeds")
-    stamp(msg, s.t, "base_link")
+    stamp(msg, s.t, FRAME_BASE)
     msg.omega_rl, msg.omega_rr = s.omega_rl, s.omega_rr
     return msg
 
@@ -166,7 +169,7 @@ def wheels_from_msg(msg: Any) -> WheelSpeedSample:
 
 def steering_to_msg(node: Any, s: EpsSample) -> Any:
     msg = node.make("moose_msgs/msg/SteeringReport")
-    stamp(msg, s.t, "base_link")
+    stamp(msg, s.t, FRAME_BASE)
     msg.delta = s.delta
     return msg
 
@@ -175,13 +178,19 @@ def steering_from_msg(msg: Any) -> EpsSample:
     return EpsSample(time_of(msg), msg.delta)
 
 
+def _yaw(quaternion: Any, theta: float) -> None:
+    """A rotation by ``theta`` (rad) about z as a quaternion."""
+    quaternion.x, quaternion.y = 0.0, 0.0
+    quaternion.z, quaternion.w = math.sin(theta / 2), math.cos(theta / 2)
+
+
 def odometry_to_msg(node: Any, t: float, state: np.ndarray) -> Any:
-    """Ground-truth odometry (REP-105: pose in odom, twist in base_link)."""
+    """Ground-truth odometry (REP-105: pose in odom, twist in the true body frame ``base_link_truth``)."""
     msg = node.make("nav_msgs/msg/Odometry")
-    stamp(msg, t)
-    msg.child_frame_id = "base_link"
+    stamp(msg, t, FRAME_ODOM)
+    msg.child_frame_id = FRAME_TRUTH
     msg.pose.pose.position.x, msg.pose.pose.position.y = float(state[0]), float(state[1])
-    msg.pose.pose.orientation.z, msg.pose.pose.orientation.w = math.sin(state[2] / 2), math.cos(state[2] / 2)
+    _yaw(msg.pose.pose.orientation, float(state[2]))
     msg.twist.twist.linear.x, msg.twist.twist.linear.y = float(state[3]), float(state[4])
     msg.twist.twist.angular.z = float(state[5])
     return msg
@@ -189,7 +198,7 @@ def odometry_to_msg(node: Any, t: float, state: np.ndarray) -> Any:
 
 def actuator_to_msg(node: Any, t: float, reference: Reference, u: np.ndarray) -> Any:
     msg = node.make("moose_msgs/msg/ActuatorCommand")
-    stamp(msg, t, "base_link")
+    stamp(msg, t, FRAME_BASE)
     msg.steering_angle, msg.steering_rate = reference.delta, float(u[0])
     msg.torque_rl, msg.torque_rr = float(u[1]), float(u[2])
     return msg
@@ -208,6 +217,104 @@ def diagnostic_to_msg(node: Any, t: float, name: str, level: int, message: str, 
     msg = node.make("diagnostic_msgs/msg/DiagnosticArray")
     stamp(msg, t, "")
     msg.status = [status]
+    return msg
+
+
+def _transform(node: Any, t: float, parent: str, child: str, x: float, y: float, z: float = 0.0,
+               theta: float = 0.0) -> Any:
+    msg = node.make("geometry_msgs/msg/TransformStamped")
+    stamp(msg, t, parent)
+    msg.child_frame_id = child
+    msg.transform.translation.x, msg.transform.translation.y, msg.transform.translation.z = x, y, z
+    _yaw(msg.transform.rotation, theta)
+    return msg
+
+
+def estimate_tf(node: Any, e: StateEstimate) -> Any:
+    """``/tf``: odom → base_link, the observer's estimate (REP-105: the state estimator's transform)."""
+    msg = node.make("tf2_msgs/msg/TFMessage")
+    msg.transforms = [_transform(node, e.t, FRAME_ODOM, FRAME_BASE, e.x, e.y, theta=e.theta)]
+    return msg
+
+
+def truth_tf(node: Any, t: float, state: np.ndarray) -> Any:
+    """``/tf``: odom → base_link_truth, the simulator's ground truth (plant state [x, y, θ, …])."""
+    msg = node.make("tf2_msgs/msg/TFMessage")
+    msg.transforms = [_transform(node, t, FRAME_ODOM, FRAME_TRUTH, float(state[0]), float(state[1]),
+                                 theta=float(state[2]))]
+    return msg
+
+
+def static_tf(node: Any, t: float) -> Any:
+    """``/tf_static``: base_link → each sensor frame at its mount (:data:`moose_ros.graph.SENSOR_MOUNTS`)."""
+    msg = node.make("tf2_msgs/msg/TFMessage")
+    msg.transforms = [_transform(node, t, FRAME_BASE, frame, *mount) for frame, mount in SENSOR_MOUNTS.items()]
+    return msg
+
+
+MARKER_COLOURS: dict[str, tuple[float, float, float, float]] = {
+    "danger_zone": (0.84, 0.15, 0.16, 0.6),   # the paper's red box
+    "danger_zone_width": (1.0, 0.5, 0.05, 1.0),
+    "mpc": (0.12, 0.47, 0.71, 1.0),           # blue
+    "msf": (0.17, 0.63, 0.17, 1.0),           # green
+    "blend": (0.0, 0.0, 0.0, 1.0),            # black: what the car is asked to follow
+}
+"""RGBA of each marker namespace of ``/planning/markers`` (the Foxglove layout's legend)."""
+MARKER_LINE_WIDTH = 0.08
+"""Width of the predicted paths (m)."""
+ZONE_HEIGHT = 1.0
+"""Drawn height of the danger zone (m): a box on the ground; the zone itself is 2-D."""
+_ARROW, _CUBE, _LINE_STRIP = 0, 1, 4
+_ADD, _DELETE = 0, 2
+
+
+def _marker(node: Any, t: float, ns: str, kind: int) -> Any:
+    m = node.make("visualization_msgs/msg/Marker")
+    stamp(m, t, FRAME_ODOM)
+    m.ns, m.id, m.type, m.action = ns, 0, kind, _ADD
+    m.pose.orientation.w = 1.0
+    m.color.r, m.color.g, m.color.b, m.color.a = MARKER_COLOURS[ns]
+    return m
+
+
+def _point(node: Any, x: float, y: float, z: float = 0.0) -> Any:
+    p = node.make("geometry_msgs/msg/Point")
+    p.x, p.y, p.z = float(x), float(y), float(z)
+    return p
+
+
+def _path(node: Any, t: float, ns: str, path: Optional[np.ndarray]) -> Any:
+    m = _marker(node, t, ns, _LINE_STRIP)
+    if path is None or len(path) < 2:
+        m.action = _DELETE
+        return m
+    m.scale.x = MARKER_LINE_WIDTH
+    m.points = [_point(node, x, y) for x, y in np.asarray(path, dtype=float)[:, :2]]
+    return m
+
+
+def markers_to_msg(node: Any, t: float, threat: Optional[Threat], mpc: Optional[PlanResult],
+                   msf: Optional[PlanResult], blend: Optional[np.ndarray]) -> Any:
+    """``/planning/markers`` of one planning instant, in odom: the danger zone (the box the CoG must avoid,
+    the paper's red box) and its width w from the ego path toward the evasion side (a Threat's ``y_path``,
+    ``side`` and ``w``), and the predicted paths of the MPC and the MSF planner (``PlanResult.predicted``)
+    and of the blend (``blend``: (N + 1, ≥ 2) positions, :func:`moose.planning.blend_path`).  What is
+    absent is deleted (action DELETE), so a viewer never keeps a stale zone or path."""
+    zone = _marker(node, t, "danger_zone", _CUBE)
+    width = _marker(node, t, "danger_zone_width", _ARROW)
+    if threat is None:
+        zone.action = width.action = _DELETE
+    else:
+        o = threat.obstacle
+        zone.pose.position.x, zone.pose.position.y = 0.5 * (o.x_min + o.x_max), 0.5 * (o.y_min + o.y_max)
+        zone.pose.position.z = 0.5 * ZONE_HEIGHT
+        zone.scale.x, zone.scale.y, zone.scale.z = o.x_max - o.x_min, o.y_max - o.y_min, ZONE_HEIGHT
+        width.points = [_point(node, o.x_min, threat.y_path, 0.05),
+                        _point(node, o.x_min, threat.y_path + threat.side * threat.w, 0.05)]
+        width.scale.x, width.scale.y, width.scale.z = 0.1, 0.3, 0.4  # shaft and head diameter, head length
+    msg = node.make("visualization_msgs/msg/MarkerArray")
+    msg.markers = [zone, width, _path(node, t, "mpc", mpc.predicted if mpc is not None else None),
+                   _path(node, t, "msf", msf.predicted if msf is not None else None), _path(node, t, "blend", blend)]
     return msg
 
 

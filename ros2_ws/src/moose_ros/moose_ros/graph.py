@@ -1,4 +1,4 @@
-"""The graph contract: every topic, every node, the launch graphs and the defaults they share.
+"""The graph contract: every topic, every frame, every node, the launch graphs and the defaults they share.
 
 One definition of each fact of the node graph (paper Fig. 3). Nodes publish and subscribe through
 :meth:`Topic.publisher` and :meth:`Topic.subscription`; the launcher, the bag recorder and player,
@@ -73,6 +73,21 @@ the vehicle-side ECU emulator behind the DBC, over ``udp_multicast`` here."""
 SENSOR_SOURCES = ("vehicle_simulator", "can_bridge")
 """Who publishes the vehicle's sensor topics: the simulator on topics, or the CAN bridge from the bus."""
 
+# -- frames (REP-105) --------------------------------------------------------------------------------
+FRAME_ODOM = "odom"
+"""The world-fixed frame of the run (x along the initial heading, y left)."""
+FRAME_BASE = "base_link"
+"""The vehicle at its CoG as the stack believes it: ``odom → base_link`` is the observer's estimate (on the
+car as in simulation; the state estimator owns this transform, REP-105)."""
+FRAME_TRUTH = "base_link_truth"
+"""The vehicle at its CoG in truth: ``odom → base_link_truth`` is the simulator's ground truth, a second child
+of ``odom`` beside ``base_link`` so that the two never fight over one transform."""
+FRAME_IMU = "imu"
+FRAME_GPS = "gps"
+SENSOR_MOUNTS: dict[str, tuple[float, float, float]] = {FRAME_IMU: (0.0, 0.0, 0.0), FRAME_GPS: (0.0, 0.0, 0.0)}
+"""Each sensor's frame: its position in ``base_link`` (m; no rotation). The sensor model measures at the CoG
+(the paper gives no mounting positions), so both are at the origin; /tf_static carries them."""
+
 
 @dataclasses.dataclass(frozen=True)
 class Topic:
@@ -107,21 +122,38 @@ class Topic:
         """A subscription to this topic on runtime node ``rt``, with the subscribers' QoS."""
         return rt.subscription(self.type, self.name, callback, self.subscription_qos)
 
+    @property
+    def tool_qos(self) -> Qos:
+        """What tools that must not miss a sample request (the launcher's monitor, the bag recorder): the
+        publishers' reliability and durability, as rosbag2 adapts its request to the offers, and a keep-last
+        depth of at least 100 (a latched topic keeps one sample per writer)."""
+        base = self.subscription_qos if self.qos.transient_local else self.qos
+        return Qos(reliable=self.qos.reliable, depth=max(base.depth, 100), transient_local=self.qos.transient_local)
+
+    def tool_subscription(self, rt: Any, callback: Callable[[Any], None]) -> Any:
+        """A subscription of a tool (monitor, recorder) with :attr:`tool_qos`."""
+        return rt.subscription(self.type, self.name, callback, self.tool_qos)
+
+
+QOS_TF = Qos(reliable=True, depth=100)
+"""tf2's TransformBroadcaster and TransformListener: reliable, volatile, keep last 100."""
+QOS_SENSOR_PUBLISHER = QOS_DEFAULT
+"""REP-2003: sensor drivers publish with the system default QoS (reliable), so that every subscriber matches."""
 
 _ALL = tuple(NODES)
 CLOCK = Topic(CLOCK_TOPIC, CLOCK_TYPE, QOS_CLOCK, "100 Hz", 100.0, ("vehicle_simulator",),
               tuple(n for n in _ALL if n != "vehicle_simulator"), "simulated time (use_sim_time)",
               reader_qos=QOS_CLOCK_READER)
-ODOM = Topic("/vehicle/odom", "nav_msgs/msg/Odometry", QOS_SENSOR, "100 Hz", 100.0, ("vehicle_simulator",), (),
-             "odom → base_link, ground truth")
-IMU = Topic("/vehicle/imu", "sensor_msgs/msg/Imu", QOS_SENSOR, "100 Hz", 100.0, SENSOR_SOURCES, ("observer",),
-            "base_link; a_x, a_y, γ")
-GPS = Topic("/vehicle/gps", "nav_msgs/msg/Odometry", QOS_DEFAULT, "1 Hz", 1.0, SENSOR_SOURCES, ("observer",),
-            "local fix, stamped at measurement, sent 0.2 s later")
-WHEEL_SPEEDS = Topic("/vehicle/wheel_speeds", "moose_msgs/msg/WheelSpeeds", QOS_SENSOR, "100 Hz", 100.0,
-                     SENSOR_SOURCES, ("observer",), "rear wheel speeds")
-STEERING = Topic("/vehicle/steering", "moose_msgs/msg/SteeringReport", QOS_SENSOR, "100 Hz", 100.0, SENSOR_SOURCES,
-                 ("observer", "motion_controller"), "EPS steering angle")
+ODOM = Topic("/vehicle/odom", "nav_msgs/msg/Odometry", QOS_SENSOR_PUBLISHER, "100 Hz", 100.0, ("vehicle_simulator",),
+             (), "odom → base_link_truth, ground truth", reader_qos=QOS_SENSOR)
+IMU = Topic("/vehicle/imu", "sensor_msgs/msg/Imu", QOS_SENSOR_PUBLISHER, "100 Hz", 100.0, SENSOR_SOURCES, ("observer",),
+            "frame imu; a_x, a_y, γ", reader_qos=QOS_SENSOR)
+GPS = Topic("/vehicle/gps", "nav_msgs/msg/Odometry", QOS_SENSOR_PUBLISHER, "1 Hz", 1.0, SENSOR_SOURCES, ("observer",),
+            "odom → gps fix, stamped at measurement, sent 0.2 s later; read reliably (one fix a second)")
+WHEEL_SPEEDS = Topic("/vehicle/wheel_speeds", "moose_msgs/msg/WheelSpeeds", QOS_SENSOR_PUBLISHER, "100 Hz", 100.0,
+                     SENSOR_SOURCES, ("observer",), "rear wheel speeds", reader_qos=QOS_SENSOR)
+STEERING = Topic("/vehicle/steering", "moose_msgs/msg/SteeringReport", QOS_SENSOR_PUBLISHER, "100 Hz", 100.0,
+                 SENSOR_SOURCES, ("observer", "motion_controller"), "EPS steering angle", reader_qos=QOS_SENSOR)
 OBSTACLES = Topic("/perception/obstacles", "moose_msgs/msg/ObstacleArray", QOS_LATCHED, "on appearance", None,
                   ("vehicle_simulator",), ("obstacle_detector",), "danger zones seen by the perception sensor")
 STATE = Topic("/perception/state", "moose_msgs/msg/StateEstimate", QOS_DEFAULT, "100 Hz", 100.0, ("observer",),
@@ -134,7 +166,7 @@ PLAN_MPC = Topic("/planning/mpc", "moose_msgs/msg/PlannerOutput", QOS_DEFAULT, "
 PLAN_MSF = Topic("/planning/msf", "moose_msgs/msg/PlannerOutput", QOS_DEFAULT, "5 Hz + on a new obstacle", 5.0,
                  ("msf_planner",), ("weight_fbl",), "planned accelerations, status")
 BLEND = Topic("/planning/blend", "moose_msgs/msg/Blend", QOS_DEFAULT, "5 Hz", 5.0, ("weight_fbl",),
-              ("mpc_planner",), "w_MPC and the blended plan: the MPC's next initial guess")
+              ("mpc_planner",), "w_MPC, the blended plan (the MPC's next initial guess), δ*, δ_MPC")
 REFERENCE = Topic("/control/reference", "moose_msgs/msg/Reference", QOS_DEFAULT,
                   "100 Hz (δ* re-evaluated per estimate)", 100.0, ("weight_fbl",), ("motion_controller",), "δ*, v_x*")
 ACTUATOR_COMMAND = Topic("/control/actuator_command", "moose_msgs/msg/ActuatorCommand", QOS_DEFAULT,
@@ -144,9 +176,16 @@ DIAGNOSTICS = Topic("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", QOS_L
                     ("vehicle_simulator",), "each node's status; the simulator starts the clock when all reported",
                     reader_qos=QOS_LATCHED_READER)
 
+TF = Topic("/tf", "tf2_msgs/msg/TFMessage", QOS_TF, "100 Hz per publisher", 100.0, ("vehicle_simulator", "observer"),
+           (), "odom → base_link (observer, estimate), odom → base_link_truth (simulator, ground truth)")
+TF_STATIC = Topic("/tf_static", "tf2_msgs/msg/TFMessage", QOS_LATCHED, "once at start", None, SENSOR_SOURCES, (),
+                  "base_link → imu, gps (sensor mounts)", reader_qos=QOS_LATCHED_READER)
+MARKERS = Topic("/planning/markers", "visualization_msgs/msg/MarkerArray", QOS_DEFAULT, "5 Hz (per blend)", 5.0,
+                ("weight_fbl",), (), "in odom: danger zone, its width w, MPC, MSF and blended predicted paths")
+
 TOPICS: dict[str, Topic] = {t.name: t for t in (
     CLOCK, ODOM, IMU, GPS, WHEEL_SPEEDS, STEERING, OBSTACLES, STATE, THREAT, PLAN_MPC, PLAN_MSF, BLEND, REFERENCE,
-    ACTUATOR_COMMAND, DIAGNOSTICS,
+    ACTUATOR_COMMAND, DIAGNOSTICS, TF, TF_STATIC, MARKERS,
 )}
 """Every topic of the graph by name."""
 

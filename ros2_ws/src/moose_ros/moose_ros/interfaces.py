@@ -152,6 +152,16 @@ def message_class(type_name: str) -> type:
     return cls
 
 
+def type_hash(type_name: str) -> str:
+    """The RIHS01 type hash of ``pkg/msg/Type`` (``RIHS01_`` + 64 hex digits), computed by rosbags'
+    ``hash_rihs01`` from the definitions of :func:`typestore` (what ROS 2 Jazzy's rosidl computes)."""
+    check_type_name(type_name)
+    if type_name not in typestore().fielddefs:
+        raise UnknownMessageType(f"message type {type_name!r} is unknown (not a standard ROS 2 Jazzy type "
+                                 f"nor in {msg_dir()})")
+    return str(typestore().hash_rihs01(type_name))
+
+
 def field_names(type_name: str) -> list[str]:
     """The fields of ``pkg/msg/Type`` in ``.msg`` order."""
     message_class(type_name)

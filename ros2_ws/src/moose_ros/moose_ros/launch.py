@@ -34,6 +34,7 @@ from moose.simulation import SimulationResult
 
 from . import convert as cv
 from .bag import Recorder
+from .bag.params import RunParameters
 from .graph import BLEND, DIAGNOSTICS, GRAPHS, ODOM, PLAN_MPC, STEERING, THREAT
 from .parameters import check_parameter_file, node_parameters, parameter_names
 from .runtime import DdsNode
@@ -55,13 +56,13 @@ class Monitor:
     diagnostics: dict = dataclasses.field(default_factory=dict)
     finished: bool = False
 
-    def attach(self, node: DdsNode) -> None:
-        ODOM.subscription(node, self.on_odom)
-        STEERING.subscription(node, lambda m: setattr(self, "delta", m.delta))
-        PLAN_MPC.subscription(node, self.on_mpc)
-        BLEND.subscription(node, lambda m: self.weights.__setitem__(cv.time_of(m), m.weight_mpc))
-        THREAT.subscription(node, self.on_threat)
-        DIAGNOSTICS.subscription(node, self.on_diagnostics)
+    def attach(self, node: DdsNode) -> None:  # a tool that must not miss a sample (graph.Topic.tool_qos)
+        ODOM.tool_subscription(node, self.on_odom)
+        STEERING.tool_subscription(node, lambda m: setattr(self, "delta", m.delta))
+        PLAN_MPC.tool_subscription(node, self.on_mpc)
+        BLEND.tool_subscription(node, lambda m: self.weights.__setitem__(cv.time_of(m), m.weight_mpc))
+        THREAT.tool_subscription(node, self.on_threat)
+        DIAGNOSTICS.tool_subscription(node, self.on_diagnostics)
 
     def on_odom(self, m: Any) -> None:
         p, q, v = m.pose.pose.position, m.pose.pose.orientation, m.twist.twist.linear
@@ -158,11 +159,13 @@ def launch(
     kill_after: Optional[tuple[str, float]] = None,
     out=sys.stdout,
     bag: Optional[Any] = None,
+    foxglove: Optional[tuple[str, int]] = None,
 ) -> dict[str, Any]:
     """Run the graph once and return the summary (plus ``node_exits`` and ``diagnostics``).
 
     ``params``: node parameters (``scenario`` or the ad-hoc ``speed``/``tau``/…, ``can_interface``, …) given
-    to every node that takes them; see :func:`node_overrides`."""
+    to every node that takes them; see :func:`node_overrides`.  ``foxglove``: (host, port) of a live view
+    (:class:`moose_ros.live.LiveView`) served while the graph runs."""
     planner = planner_mode(planner, params_file)
     if scenario.mu is not None:  # the road of this run, for every node: one friction in the whole graph
         params = {"vehicle.mu": scenario.mu, **params}
@@ -170,9 +173,18 @@ def launch(
     monitor = Monitor(scenario, scenario.configure(load_config(params_file)))
     node = DdsNode("moose_monitor", overrides={"use_sim_time": False})
     monitor.attach(node)
+    recorder = live = None
     try:
-        recorder = Recorder(node, bag) if bag is not None else None  # an unusable path stops the launch here
+        run = RunParameters(monitor.config, scenario, planner, seed)  # kept in the bag (moose bag replan uses it)
+        recorder = Recorder(node, bag, parameters=run) if bag is not None else None  # an unusable path stops here
+        if foxglove is not None:
+            from .live import LiveView
+
+            live = LiveView(node, host=foxglove[0], port=foxglove[1])
+            out.write(f"[launch] Foxglove live view on {live.url}\n")
     except Exception:
+        if recorder is not None:
+            recorder.close()
         node.shutdown()
         raise
     procs: dict[str, subprocess.Popen] = {}
@@ -231,6 +243,8 @@ def launch(
                 proc.kill()
                 proc.wait()
             exits.setdefault(name, proc.returncode)
+        if live is not None:
+            live.close()
         node.shutdown()
         if recorder is not None:
             recorder.close()

@@ -8,6 +8,7 @@ record is kept (for chunked files, every complete chunk), so no summary, index o
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator, Optional, Sequence
@@ -81,7 +82,7 @@ def _recover(path: Path, wanted: Optional[set[str]]) -> Iterator[BagMessage]:
                         if wanted is None or topic in wanted:
                             messages.append(BagMessage(topic, type_name, record.log_time,
                                                        store.deserialize_cdr(record.data, type_name)))
-            except (McapError, EOFError, ValueError, KeyError, AssertionError) as exc:
+            except (McapError, EOFError, ValueError, KeyError, AssertionError, struct.error) as exc:  # a cut record
                 if not messages and not channels:
                     raise BagError(f"bag file {str(file)!r} is not a readable MCAP file: {exc}") from None
             found = found or bool(channels)

@@ -5,28 +5,35 @@ import time
 from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
 
-from ..graph import BLEND, OBSTACLES, ODOM, PLANS, STATE, THREAT, TOPICS
+from ..graph import (
+    ACTUATOR_COMMAND, BLEND, CLOCK, DIAGNOSTICS, MARKERS, OBSTACLES, ODOM, PLANS, REFERENCE, STATE, TF, TF_STATIC, THREAT,
+    TOPICS,
+)
 from .errors import BagError
+from .params import RunParameters
 from .writer import BagWriter
 
 
 class Recorder:
-    """Records topics of a running graph through a runtime node, with the contract's subscriber QoS.
+    """Records topics of a running graph through a runtime node, with the QoS of a tool (the publishers'
+    reliability and durability, :attr:`moose_ros.graph.Topic.tool_qos`).
 
     Messages are stamped on reception with the wall clock, never earlier than the previous one (a step
     of the clock back would otherwise put them out of order).  A recorder killed with SIGKILL loses only
-    what it had not yet taken from its subscriptions (:mod:`moose_ros.bag.writer`).
+    what it had not yet taken from its subscriptions (:mod:`moose_ros.bag.writer`).  ``parameters``: the run's
+    (:class:`~moose_ros.bag.params.RunParameters`), kept in the bag.
     """
 
-    def __init__(self, node: Any, path: str | Path, topics: Optional[Sequence[str]] = None) -> None:
+    def __init__(self, node: Any, path: str | Path, topics: Optional[Sequence[str]] = None,
+                 parameters: Optional[RunParameters] = None) -> None:
         chosen = list(topics) if topics else list(TOPICS)
         unknown = [t for t in chosen if t not in TOPICS]
         if unknown:
             raise BagError(f"--topics {unknown[0]!r} is not a topic of the graph; topics: {', '.join(TOPICS)}")
-        self.writer = BagWriter(path)
+        self.writer = BagWriter(path, custom_data=parameters.as_strings() if parameters is not None else None)
         self._last_ns = 0
         for topic in chosen:
-            TOPICS[topic].subscription(node, self._callback(topic))
+            TOPICS[topic].tool_subscription(node, self._callback(topic))
 
     def _callback(self, topic: str) -> Callable[[Any], None]:
         type_name = TOPICS[topic].type
@@ -42,43 +49,79 @@ class Recorder:
 
 
 def record_result(result: Any, path: str | Path) -> dict[str, int]:
-    """Write a lockstep run (``moose simulate``) as a bag on the graph's topics, stamped in simulated time."""
+    """Write a lockstep run (``moose simulate``) as a bag on the graph's topics, stamped in simulated time:
+    what the graph's nodes would have published (sensor samples, ground truth and /tf, estimates and their
+    /tf, threats, plans, blends, markers, references, actuator commands, /clock), a 1 Hz status of the run on
+    /diagnostics, the sensor frames on /tf_static, and the run's parameters."""
     from types import SimpleNamespace
 
     import numpy as np
+
+    from moose.planning import blend_path
+    from moose.signals import Reference
 
     from .. import convert as cv
     from ..interfaces import make
 
     factory = SimpleNamespace(make=make)
-    writer = BagWriter(path)
-    entries: list[tuple[int, str, Any]] = []
+    parameters = RunParameters(result.config, result.scenario, result.planner, result.seed)
+    writer = BagWriter(path, custom_data=parameters.as_strings())
+    entries: list[tuple[int, int, str, Any]] = []
 
     def add(t: float, topic: str, msg: Any) -> None:
-        entries.append((int(round(t * 1e9)), topic, msg))
+        entries.append((int(round(t * 1e9)), len(entries), topic, msg))
 
+    trace = result.trace
+    add(0.0, TF_STATIC.name, cv.static_tf(factory, 0.0))
+    for k, t in enumerate(trace["t"]):
+        t = float(t)
+        clock = make(CLOCK.type)
+        clock.clock.sec, clock.clock.nanosec = divmod(int(round(t * 1e9)), 1_000_000_000)
+        add(t, CLOCK.name, clock)
+        state = np.array([trace[c][k] for c in ("x", "y", "theta", "vx", "vy", "gamma")])
+        add(t, ODOM.name, cv.odometry_to_msg(factory, t, state))
+        add(t, TF.name, cv.truth_tf(factory, t, state))
+        reference = Reference(float(trace["delta_ref"][k]), float(trace["vx_ref"][k]))
+        add(t, REFERENCE.name, cv.reference_to_msg(factory, t, reference))
+        u = np.array([trace["u_delta_rate"][k], trace["u_T_rl"][k], trace["u_T_rr"][k]])
+        add(t, ACTUATOR_COMMAND.name, cv.actuator_to_msg(factory, t, reference, u))
     for sample in result.samples:
         topic, convert = cv.SENSOR_SAMPLES[type(sample)]
         add(sample.t, topic.name, convert(factory, sample))
-    trace = result.trace
-    columns = ("x", "y", "theta", "vx", "vy", "gamma")
-    for k, t in enumerate(trace["t"]):
-        add(float(t), ODOM.name, cv.odometry_to_msg(factory, float(t), np.array([trace[c][k] for c in columns])))
     for estimate in result.estimates:
         add(estimate.t, STATE.name, cv.estimate_to_msg(factory, estimate))
+        add(estimate.t, TF.name, cv.estimate_tf(factory, estimate))
     appeared = next((t for t, threat in result.threats if threat is not None), None)
     if appeared is not None:
         add(appeared, OBSTACLES.name, cv.obstacles_to_msg(factory, appeared, [result.scenario.danger_zone]))
     for t, threat in result.threats:
         add(t, THREAT.name, cv.threat_to_msg(factory, t, threat))
+    status = "idle"
     for record in result.planning:
         for kind, plan in (("mpc", record.mpc), ("msf", record.msf)):
             if plan is not None:
                 add(record.t, PLANS[kind].name, cv.plan_to_msg(factory, record.t, kind, plan))
-        add(record.t, BLEND.name, cv.blend_to_msg(factory, record.t, record.blend, record.reference))
-    entries.sort(key=lambda e: e[0])
+        add(record.t, BLEND.name, cv.blend_to_msg(factory, record.t, record.blend, record.reference,
+                                                     record.delta_mpc))
+        estimate = result.estimates[int(round(record.t * result.config.simulation.motion_rate_hz))]  # one per tick
+        path_ = blend_path(record.blend, estimate, result.config.grid.t_s)
+        add(record.t, MARKERS.name, cv.markers_to_msg(factory, record.t, record.threat, record.mpc, record.msf, path_))
+    plans = iter(result.planning)
+    record = next(plans, None)
+    for k, t in enumerate(trace["t"]):
+        t = float(t)
+        while record is not None and record.t <= t + 1e-9:
+            status = record.mpc.status if record.mpc is not None else "-"
+            record = next(plans, None)
+        last = k == len(trace["t"]) - 1
+        if abs(t - round(t)) < 1e-9 or last:  # 1 Hz, and the end of the run
+            values = {"t": f"{t:.2f}", "x": f"{trace['x'][k]:.2f}", "y": f"{trace['y'][k]:.2f}",
+                      "weight_mpc": f"{trace['weight_mpc'][k]:.3f}", "mpc_status": status}
+            add(t, DIAGNOSTICS.name, cv.diagnostic_to_msg(factory, t, "moose_simulate", 0,
+                                                           "finished" if last else "running", values))
+    entries.sort(key=lambda e: (e[0], e[1]))
     try:
-        for stamp_ns, topic, msg in entries:
+        for stamp_ns, _order, topic, msg in entries:
             writer.write(topic, TOPICS[topic].type, stamp_ns, bytes(msg.serialize()))
     finally:
         writer.close()

@@ -13,39 +13,53 @@ from typing import Any, Optional
 from ..graph import BLEND, PLAN_MPC, PLAN_MSF, STATE, THREAT
 from ..interfaces import from_rosbags
 from .errors import BagError
+from .params import read_run_parameters
 from .reader import read_bag
 
 
-def replan(path: str | Path, config: Any, planner: str = "combined", v_des: Optional[float] = None) -> dict[str, Any]:
+def replan(path: str | Path, config: Any = None, planner: Optional[str] = None,
+           v_des: Optional[float] = None) -> dict[str, Any]:
     """Run the planners open-loop on a bag's recorded state/threat stream at its planning instants.
 
     Each instant (a recorded /planning/blend) gets the latest recorded estimate and threat;
-    the MPC's initial guess is the *re-computed* previous blend, shifted; ``v_des`` defaults
-    to the speed at the first recorded estimate.  Returns per-step
-    rows (recorded vs re-computed first accelerations, weights, statuses) and a summary.
+    the MPC's initial guess is the *re-computed* previous blend, shifted.  ``config`` and ``planner``
+    default to the run's, kept in the bag (:mod:`.params`); a bag without them gets the default
+    configuration and the combined planner.  ``v_des`` defaults to the run's scenario (its approach speed
+    until the first threat, then its v_des), without one to the speed at the first recorded estimate.
+    Returns per-step rows (recorded vs re-computed first accelerations, weights, statuses) and a summary
+    that says which parameters were used (``parameters``: ``given``, ``bag`` or ``default``).
     """
     import numpy as np
 
+    from moose.config import load_config
     from moose.planning import PlanningStep
 
     from .. import convert as cv
 
+    run = read_run_parameters(path)
+    source = "given" if config is not None else ("bag" if run is not None else "default")
+    config = config if config is not None else (run.config if run is not None else load_config())
+    planner = planner or (run.planner if run is not None else "combined")
+    scenario = run.scenario if run is not None and v_des is None else None
     step = PlanningStep(config, planner)  # type: ignore[arg-type]
     estimate = threat = None
+    detected = False
     recorded_plans: dict[str, dict[float, Any]] = {"mpc": {}, "msf": {}}
     rows = []
     for m in read_bag(path, [STATE.name, THREAT.name, PLAN_MPC.name, PLAN_MSF.name, BLEND.name]):
         msg = from_rosbags(m.msg, m.type_name)
         if m.topic == STATE.name:
             estimate = cv.estimate_from_msg(msg)
-            v_des = round(estimate.vx, 1) if v_des is None else v_des
+            v_des = round(estimate.vx, 1) if v_des is None and scenario is None else v_des
         elif m.topic == THREAT.name:
             threat = cv.threat_from_msg(msg)
+            detected = detected or threat is not None
         elif m.topic in (PLAN_MPC.name, PLAN_MSF.name):
             recorded_plans[msg.planner][round(cv.time_of(msg), 6)] = cv.plan_from_msg(msg)
         elif estimate is not None:
             t = cv.time_of(msg)
-            record = step.plan(t, estimate, threat, float(v_des))
+            speed = scenario.desired_speed(detected) if scenario is not None else v_des
+            record = step.plan(t, estimate, threat, float(speed))
             blend, new_mpc = record.blend, record.mpc
             old_mpc = recorded_plans["mpc"].get(round(t, 6))
             rows.append({
@@ -63,7 +77,8 @@ def replan(path: str | Path, config: Any, planner: str = "combined", v_des: Opti
     diff = lambda a, b: float(np.sqrt(np.mean([(r[a] - r[b]) ** 2 for r in rows])))  # noqa: E731
     same = [r for r in rows if r["recorded_mpc_status"]]
     summary = {
-        "steps": len(rows), "planner": planner,
+        "steps": len(rows), "planner": planner, "parameters": source,
+        "scenario": run.scenario.name if run is not None else None, "road_mu": config.vehicle.mu,
         "rms_ax": diff("recorded_ax", "ax"), "rms_ay": diff("recorded_ay", "ay"),
         "rms_weight": diff("recorded_weight", "weight"), "rms_delta": diff("recorded_delta", "delta"),
         "mpc_status_agreement": (sum(r["recorded_mpc_status"] == r["mpc_status"] for r in same) / len(same)) if same else None,

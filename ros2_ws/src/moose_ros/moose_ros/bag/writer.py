@@ -8,7 +8,10 @@ file record by record).  The file is also fsync'ed at least every ``fsync_period
 writing, which bounds what a power loss can take.  :meth:`BagWriter.close` writes the summary, the
 footer and ``metadata.yaml`` (rosbag2 format version 9).  Message definitions (``ros2msg``) and
 type hashes (RIHS01) come from rosbags' type store, so ``ros2 bag``, rosbags and Foxglove read
-the bag.
+the bag.  Each topic of the graph contract carries its publishers' QoS as ``offered_qos_profiles``
+(rosbag2's version-9 form), so ``ros2 bag play`` offers it again: ``/tf_static`` stays transient
+local for RViz.  ``custom_data`` (strings) goes into ``metadata.yaml`` and, at once, into an MCAP
+metadata record (:mod:`.params`).
 
 Messages must be written in time order (rosbags reads an MCAP file without chunk indexes in file
 order); an earlier timestamp is a :class:`BagError`.
@@ -25,8 +28,11 @@ from typing import Any
 import yaml
 from mcap.writer import CompressionType, Writer
 
+from ..graph import TOPICS
 from ..interfaces import typestore
+from ..runtime.qos import Qos
 from .errors import BagError
+from .params import METADATA_NAME
 
 ROSBAG2_VERSION = 9
 """rosbag2 metadata version (ROS 2 Jazzy)."""
@@ -39,10 +45,26 @@ def _library() -> str:
         return "moose_ros"
 
 
-class BagWriter:
-    """A new ROS 2 bag directory with MCAP storage; every message reaches the OS as it is written."""
+def offered_qos(qos: Qos) -> dict[str, Any]:
+    """A QoS profile as rosbag2 (metadata version 9) writes an offered profile; durations unspecified."""
+    unspecified = {"sec": 0, "nsec": 0}
+    return {"history": "keep_last", "depth": qos.depth, "reliability": "reliable" if qos.reliable else "best_effort",
+            "durability": "transient_local" if qos.transient_local else "volatile", "deadline": unspecified,
+            "lifespan": unspecified, "liveliness": "system_default", "liveliness_lease_duration": unspecified,
+            "avoid_ros_namespace_conventions": False}
 
-    def __init__(self, path: str | Path, fsync_period: float = 1.0) -> None:
+
+def _offered(topic: str) -> list[dict[str, Any]]:
+    contract = TOPICS.get(topic)
+    return [offered_qos(contract.qos)] if contract is not None else []
+
+
+class BagWriter:
+    """A new ROS 2 bag directory with MCAP storage; every message reaches the OS as it is written.
+
+    ``custom_data``: strings kept with the bag (the run's parameters, :mod:`.params`)."""
+
+    def __init__(self, path: str | Path, fsync_period: float = 1.0, custom_data: dict[str, str] | None = None) -> None:
         self.path = Path(path)
         if self.path.exists():
             raise BagError(f"bag {str(self.path)!r} exists already: choose another output directory")
@@ -58,6 +80,9 @@ class BagWriter:
             raise BagError(f"bag {str(self.path)!r} cannot be written: {exc.strerror or exc}") from None
         self._mcap = Writer(self._stream, use_chunking=False, compression=CompressionType.NONE)
         self._mcap.start(profile="ros2", library=_library())
+        self.custom_data = dict(custom_data or {})
+        if self.custom_data:
+            self._mcap.add_metadata(METADATA_NAME, self.custom_data)
         self._store = typestore()
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, tuple[int, str]] = {}
@@ -77,7 +102,8 @@ class BagWriter:
         if type_name not in self._schemas:
             msgdef, _ = self._store.generate_msgdef(type_name, ros_version=2)
             self._schemas[type_name] = self._mcap.register_schema(type_name, "ros2msg", msgdef.encode())
-        channel = self._mcap.register_channel(topic, "cdr", self._schemas[type_name], {"offered_qos_profiles": "[]"})
+        offered = yaml.safe_dump(_offered(topic), sort_keys=False) if topic in TOPICS else ""
+        channel = self._mcap.register_channel(topic, "cdr", self._schemas[type_name], {"offered_qos_profiles": offered})
         self._channels[topic] = (channel, type_name)
         return channel
 
@@ -120,7 +146,8 @@ class BagWriter:
             "message_count": count,
             "topics_with_message_count": [
                 {"topic_metadata": {"name": topic, "type": type_name, "serialization_format": "cdr",
-                                    "offered_qos_profiles": [], "type_description_hash": self._store.hash_rihs01(type_name)},
+                                    "offered_qos_profiles": _offered(topic),
+                                    "type_description_hash": self._store.hash_rihs01(type_name)},
                  "message_count": self.counts[topic]}
                 for topic, (_channel, type_name) in self._channels.items()
             ],
@@ -128,7 +155,7 @@ class BagWriter:
             "compression_mode": "",
             "files": [{"path": self.file.name, "starting_time": {"nanoseconds_since_epoch": start},
                        "duration": {"nanoseconds": duration}, "message_count": count}],
-            "custom_data": None,
+            "custom_data": self.custom_data or None,
             "ros_distro": "jazzy",
         }
 

@@ -34,11 +34,15 @@ def add_subparser(subparsers: Any) -> None:
     export.add_argument("--topics", nargs="+")
     replan = bag_sub.add_parser("replan", help="run the planners open-loop on a bag's recorded state and threats")
     replan.add_argument("path")
-    replan.add_argument("--planner", choices=["combined", "mpc", "msf"], default="combined")
-    replan.add_argument("--params", help="ROS 2 parameter file with the parameters to judge")
-    replan.add_argument("--v-des", type=positive_float, help="desired speed (default: speed at the first estimate)")
+    replan.add_argument("--planner", choices=["combined", "mpc", "msf"], help="planner mode (default: the run's)")
+    replan.add_argument("--params", help="ROS 2 parameter file with the parameters to judge (default: the run's, "
+                        "kept in the bag)")
+    replan.add_argument("--v-des", type=positive_float, help="desired speed (default: the run's scenario)")
     replan.add_argument("--plot", help="write recorded vs re-computed references (PNG)")
-    for parser_ in (record, play, info, export, replan):
+    view = bag_sub.add_parser("view", help="bird's-eye view: path, danger zone, predicted paths (PNG)")
+    view.add_argument("path")
+    view.add_argument("-o", "--output", required=True, help="PNG to write")
+    for parser_ in (record, play, info, export, replan, view):
         parser_.set_defaults(func=cmd_bag)
 
 
@@ -57,8 +61,13 @@ def cmd_bag(args: argparse.Namespace) -> int:
         elif args.bag_command == "replan":
             from moose.config import load_config
 
-            result = bag.replan(args.path, load_config(args.params), args.planner, args.v_des)
+            config = load_config(args.params) if args.params else None
+            result = bag.replan(args.path, config, args.planner, args.v_des)
             summary = result["summary"]
+            print({"given": f"parameters      {args.params}",
+                   "bag": f"parameters      the run's (bag): scenario {summary['scenario']}, road μ {summary['road_mu']}",
+                   "default": "parameters      default config/moose.yaml (the bag has no run parameters)"}[
+                       summary["parameters"]])
             print("  t (s)   w rec / new    v̇_Y rec / new (m/s²)   δ* rec / new (rad)   MPC status rec / new")
             for r in result["rows"]:
                 print(f"{r['t']:7.2f}   {r['recorded_weight']:5.2f} / {r['weight']:5.2f}   {r['recorded_ay']:8.3f} / {r['ay']:8.3f}"
@@ -66,6 +75,8 @@ def cmd_bag(args: argparse.Namespace) -> int:
             print(json.dumps(summary, indent=2))
             if args.plot:
                 print(f"figure {bag.plot_replan(result['rows'], args.plot)}")
+        elif args.bag_command == "view":
+            print(f"figure {bag.plot_birdseye(args.path, args.output)}")
         elif args.bag_command == "record":
             return _record(bag, args)
         elif args.bag_command == "play":

@@ -12,6 +12,7 @@ from moose.cli.simulate import format_summary
 from moose.params import ParamError
 
 from ..graph import GRAPHS
+from ..live import DEFAULT_HOST, DEFAULT_PORT
 
 
 def add_subparser(subparsers: Any) -> None:
@@ -26,6 +27,10 @@ def add_subparser(subparsers: Any) -> None:
     launch.add_argument("--json", help="write the summary as JSON to this path")
     launch.add_argument("--bag", help="record every topic into this bag directory (default: a new folder under runs/)")
     launch.add_argument("--no-bag", action="store_true", help="do not record a bag")
+    launch.add_argument("--foxglove", nargs="?", type=int, const=DEFAULT_PORT, metavar="PORT",
+                        help=f"serve the live graph to Foxglove over its WebSocket protocol (default port {DEFAULT_PORT})")
+    launch.add_argument("--foxglove-host", default=DEFAULT_HOST,
+                        help=f"address the live view binds to (default {DEFAULT_HOST}: this machine only)")
     launch.set_defaults(func=cmd_launch)
 
 
@@ -43,7 +48,8 @@ def cmd_launch(args: argparse.Namespace) -> int:
     bag = None if args.no_bag else (Path(args.bag) if args.bag else run_folder(scenario.name, planner) / "bag")
     try:
         summary = launch(scenario, params, graph=args.graph, planner=planner, seed=args.seed, params_file=args.config,
-                         rate=args.rate, bag=bag)
+                         rate=args.rate, bag=bag,
+                         foxglove=(args.foxglove_host, args.foxglove) if args.foxglove is not None else None)
     except BagError as exc:
         raise ParamError(str(exc)) from None
     print(format_summary(summary))

@@ -4,7 +4,7 @@ from __future__ import annotations
 from typing import Any, Callable
 
 from .. import convert as cv
-from ..graph import DIAGNOSTICS
+from ..graph import DIAGNOSTICS, TF_STATIC
 from ..parameters import node_parameters
 
 OK, WARN, ERROR = 0, 1, 2
@@ -40,6 +40,8 @@ class GraphNode:
         return MaxSteeringTable.build(self.config.model_vehicle, self.config.maneuver)
 
 
-def sensor_publishers(rt: Any) -> dict[type, tuple[Callable[[Any], None], Callable[[Any, Any], Any]]]:
-    """Publisher and converter of each sensor sample type: the vehicle's sensor topics."""
+def sensor_publishers(rt: Any, t0: float) -> dict[type, tuple[Callable[[Any], None], Callable[[Any, Any], Any]]]:
+    """Publisher and converter of each sensor sample type: the vehicle's sensor topics.  The sensor frames
+    go on /tf_static once, stamped ``t0`` (transient local: late joiners get them)."""
+    TF_STATIC.publisher(rt)(cv.static_tf(rt, t0))
     return {kind: (topic.publisher(rt), convert) for kind, (topic, convert) in cv.SENSOR_SAMPLES.items()}

@@ -36,7 +36,7 @@ class CanBridge(GraphNode):
         params = BridgeParams(guard=GuardParams.from_vehicle(self.config.vehicle, timeout=p.command_timeout), bus=bus)
         self.simulated = bool(getattr(rt, "use_sim_time", False))
         self.runner = BridgeRunner(params, log=p.can_log, clock=rt.now if self.simulated else time.monotonic)
-        self.pub = sensor_publishers(rt)
+        self.pub = sensor_publishers(rt, rt.now())
         ACTUATOR_COMMAND.subscription(rt, self.on_command)
         rt.timer(COMMAND_PERIOD, self.tick)
         if not self.simulated:

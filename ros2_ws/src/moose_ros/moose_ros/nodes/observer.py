@@ -1,4 +1,5 @@
-"""``observer``: the state observer — IMU, GPS, wheel speeds, EPS → /perception/state at the IMU rate."""
+"""``observer``: the state observer — IMU, GPS, wheel speeds, EPS → /perception/state and odom → base_link on
+/tf at the IMU rate."""
 from __future__ import annotations
 
 from typing import Any
@@ -8,7 +9,7 @@ from moose.signals import StateEstimate
 from moose.vehicle import initial_state
 
 from .. import convert as cv
-from ..graph import GPS, IMU, STATE, STEERING, WHEEL_SPEEDS
+from ..graph import GPS, IMU, STATE, STEERING, TF, WHEEL_SPEEDS
 from .base import WARN, GraphNode
 
 
@@ -24,6 +25,7 @@ class Observer(GraphNode):
         self.observer = StateObserver(self.config.observer, self.config.model_vehicle,
                                       StateEstimate(0.0, start[0], 0.0, 0.0, scenario.v_init, 0.0, 0.0, 0.0))
         self.pub = STATE.publisher(rt)
+        self.pub_tf = TF.publisher(rt)
         self.dropped = 0
         IMU.subscription(rt, lambda m: self.feed(cv.imu_from_msg(m), True))
         GPS.subscription(rt, lambda m: self.feed(cv.gps_from_msg(m, self.rt.now())))
@@ -38,4 +40,6 @@ class Observer(GraphNode):
             self.level, self.message, self.values = WARN, "out-of-order samples dropped", {"dropped": self.dropped}
             return
         if publish:
-            self.pub(cv.estimate_to_msg(self.rt, self.observer.estimate()))
+            estimate = self.observer.estimate()
+            self.pub(cv.estimate_to_msg(self.rt, estimate))
+            self.pub_tf(cv.estimate_tf(self.rt, estimate))

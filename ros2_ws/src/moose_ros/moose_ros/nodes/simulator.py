@@ -11,7 +11,7 @@ from moose.sensors import Sensors
 from moose.vehicle import VehiclePlant, initial_state
 
 from .. import convert as cv
-from ..graph import ACTUATOR_COMMAND, CLOCK, DIAGNOSTICS, OBSTACLES, ODOM
+from ..graph import ACTUATOR_COMMAND, CLOCK, DIAGNOSTICS, OBSTACLES, ODOM, TF
 from .base import WARN, GraphNode, sensor_publishers
 
 
@@ -24,7 +24,7 @@ class TopicVehicleIo:
         self.timeout = node.params.command_timeout
         self.u = np.zeros(3)
         self.last_command = -math.inf
-        self.pub = sensor_publishers(rt)
+        self.pub = sensor_publishers(rt, 0.0)  # simulated time starts at 0
         ACTUATOR_COMMAND.subscription(rt, self.on_command)
 
     def on_command(self, msg: Any) -> None:
@@ -92,7 +92,8 @@ class VehicleSimulator(GraphNode):
         self.t = 0.0
         self.appeared = False
         self.finished = False
-        self.pub = {"clock": CLOCK.publisher(rt), "odom": ODOM.publisher(rt), "obstacles": OBSTACLES.publisher(rt)}
+        self.pub = {"clock": CLOCK.publisher(rt), "odom": ODOM.publisher(rt), "tf": TF.publisher(rt),
+                    "obstacles": OBSTACLES.publisher(rt)}
         self.io = CanVehicleIo(self) if self.params.vehicle_bus == "can" else TopicVehicleIo(self)
         # simulated time starts once every node named in ``wait_for`` has reported (startup of the graph)
         self.waiting = set(self.params.wait_for)
@@ -124,6 +125,7 @@ class VehicleSimulator(GraphNode):
         for sample in self.sensors.sample(t, state, self.plant.imu_specific_force(state, u)):
             self.io.send(sample, t)
         self.pub["odom"](cv.odometry_to_msg(rt, t, state))
+        self.pub["tf"](cv.truth_tf(rt, t, state))
         if not self.appeared and self.scenario.appears(float(state[0]), float(state[3])):
             self.appeared = True
             self.pub["obstacles"](cv.obstacles_to_msg(rt, t, [self.scenario.danger_zone]))

@@ -1,4 +1,5 @@
-"""``weight_fbl``: the weight function and the FBL — blends the plans of one planning instant, emits the references.
+"""``weight_fbl``: the weight function and the FBL — blends the plans of one planning instant, emits the references
+and the markers of the instant (danger zone, predicted paths).
 
 The mode switch, the blend, the FBL reference and the next initial guess are the core's planning
 step (:class:`moose.planning.PlanningStep`), the code the lockstep loop runs.
@@ -8,11 +9,11 @@ from __future__ import annotations
 import math
 from typing import Any, Optional
 
-from moose.planning import PlanningStep
+from moose.planning import PlanningStep, blend_path
 from moose.signals import StateEstimate, Threat
 
 from .. import convert as cv
-from ..graph import BLEND, PLAN_MPC, PLAN_MSF, REFERENCE, STATE, THREAT
+from ..graph import BLEND, MARKERS, PLAN_MPC, PLAN_MSF, REFERENCE, STATE, THREAT
 from .base import OK, WARN, GraphNode
 
 
@@ -33,6 +34,7 @@ class WeightFbl(GraphNode):
         self.last_mpc = -math.inf
         self.pub_blend = BLEND.publisher(rt)
         self.pub_ref = REFERENCE.publisher(rt)
+        self.pub_markers = MARKERS.publisher(rt)
         STATE.subscription(rt, self.on_state)
         THREAT.subscription(rt, lambda m: setattr(self, "threat", cv.threat_from_msg(m)))
         PLAN_MPC.subscription(rt, lambda m: self.on_plan("mpc", m))
@@ -64,8 +66,10 @@ class WeightFbl(GraphNode):
         self.level, self.message = (WARN, "mpc_planner silent: MSF only") if silent else (OK, "running")
         self.pending.clear()
         self.values = {"weight_mpc": f"{record.blend.weight_mpc:.3f}"}
-        self.pub_blend(cv.blend_to_msg(self.rt, t, record.blend, record.reference))
+        self.pub_blend(cv.blend_to_msg(self.rt, t, record.blend, record.reference, record.delta_mpc))
         self.pub_ref(cv.reference_to_msg(self.rt, t, record.reference))
+        self.pub_markers(cv.markers_to_msg(self.rt, t, record.threat, record.mpc, record.msf,
+                                           blend_path(record.blend, self.estimate, self.step.grid.t_s)))
 
     def on_state(self, msg: Any) -> None:
         self.estimate = cv.estimate_from_msg(msg)

@@ -13,6 +13,24 @@ timers fire on simulated time.
 Discovery is watched: a remote endpoint on one of our topics with another type, or with QoS that
 cannot match ours (best effort offered to a reliable reader, volatile to a transient-local one),
 is reported once with ``log_error``: such endpoints never exchange data.
+
+Graph introspection as rmw_cyclonedds does it for ROS 2 Jazzy, so ``ros2 node list``, ``ros2 node
+info``, rqt_graph and rclpy's graph API see our nodes and their endpoints:
+
+- the participant's USER_DATA is ``enclave=/;``: rmw implementations only count participants that
+  carry an enclave;
+- every writer and reader carries ``typehash=RIHS01_<64 hex>;`` in its USER_DATA, the RIHS01 hash of
+  its message type (rosbags' ``hash_rihs01``; ``rmw_dds_common::encode_type_hash_for_user_data_qos``);
+- the participant publishes ``rmw_dds_common/msg/ParticipantEntitiesInfo`` on the DDS topic
+  ``ros_discovery_info`` (no ``rt/`` prefix: ``avoid_ros_namespace_conventions``), reliable,
+  transient local, keep last 1, itself with the type hash: its GID, and per node the name, the
+  namespace and the GIDs of the node's readers and writers.  It is republished whenever the node's
+  set of endpoints changes (node created, publisher or subscription created, node destroyed: an
+  empty node list), as ``rmw_dds_common::Context`` does.  A GID is the 16-byte DDS GUID (prefix and
+  entity id; Jazzy's ``RMW_GID_STORAGE_SIZE``).  The discovery writer itself belongs to no node.
+
+ROS 2 Humble differs (documented, not implemented): ``Gid.data`` is ``char[24]`` (the GUID in the
+first 16 bytes, zeros after), and there is no type hash in USER_DATA (type hashes came with Iron).
 """
 from __future__ import annotations
 
@@ -26,7 +44,34 @@ from moose.params import ParamError
 
 from .base import Handle, NodeBase, Publisher, check_period
 from .names import CLOCK_TOPIC, CLOCK_TYPE, dds_topic_name
-from .qos import QOS_CLOCK_READER, QOS_DEFAULT, Qos
+from .qos import QOS_CLOCK_READER, QOS_DEFAULT, QOS_LATCHED, Qos
+
+DISCOVERY_TOPIC = "ros_discovery_info"
+"""rmw_dds_common's graph topic (a DDS topic name without ROS conventions)."""
+DISCOVERY_TYPE = "rmw_dds_common/msg/ParticipantEntitiesInfo"
+DISCOVERY_QOS = QOS_LATCHED
+"""rmw_cyclonedds' discovery writer: reliable, transient local, keep last 1."""
+ENCLAVE = "/"
+"""The security enclave every participant announces (rmw's default: no security)."""
+GID_SIZE = 16
+"""Bytes of a GID on ROS 2 Jazzy (``RMW_GID_STORAGE_SIZE``; Humble: 24)."""
+
+
+def participant_user_data(enclave: str = ENCLAVE) -> bytes:
+    """The participant's USER_DATA as rmw_cyclonedds writes it."""
+    return f"enclave={enclave};".encode()
+
+
+def endpoint_user_data(type_name: str) -> bytes:
+    """A writer's or reader's USER_DATA as rmw_cyclonedds writes it: ``typehash=RIHS01_…;``."""
+    from ..interfaces import type_hash
+
+    return f"typehash={type_hash(type_name)};".encode()
+
+
+def gid(guid: Any) -> list[int]:
+    """The ``rmw_dds_common/msg/Gid`` data of a DDS entity's GUID (a :class:`uuid.UUID`)."""
+    return list(guid.bytes[:GID_SIZE].ljust(GID_SIZE, b"\0"))
 
 
 class _Timer:
@@ -61,7 +106,8 @@ class DdsNode(NodeBase):
     def __init__(self, name: str, params_file: Optional[str] = None, overrides: Optional[dict[str, Any]] = None,
                  namespace: Optional[str] = None) -> None:
         from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication, BuiltinTopicDcpsSubscription
-        from cyclonedds.core import GuardCondition, InstanceState, ReadCondition, SampleState, ViewState, WaitSet
+        from cyclonedds.core import GuardCondition, InstanceState, Policy, Qos as DdsQos, ReadCondition, SampleState
+        from cyclonedds.core import ViewState, WaitSet
         from cyclonedds.domain import DomainParticipant
 
         super().__init__(name, params_file, overrides or {}, namespace)
@@ -69,7 +115,7 @@ class DdsNode(NodeBase):
         if not raw.isdigit() or int(raw) > 232:
             raise ParamError(f"ROS_DOMAIN_ID = {raw!r} is invalid: expected an integer 0..232")
         self.domain_id = int(raw)
-        self.participant = DomainParticipant(self.domain_id)
+        self.participant = DomainParticipant(self.domain_id, qos=DdsQos(Policy.Userdata(participant_user_data())))
         self._waitset = WaitSet(self.participant)
         self._guard = GuardCondition(self.participant)
         self._waitset.attach(self._guard)
@@ -80,6 +126,9 @@ class DdsNode(NodeBase):
         self._timers: list[_Timer] = []
         self._reported: set[tuple[str, str, str]] = set()
         self._sim_now: Optional[float] = None
+        self._graph_writer = self._discovery_writer()
+        self._gids: dict[str, list[list[int]]] = {"reader": [], "writer": []}
+        self._publish_graph(with_node=True)
         self._discovery = []
         for kind, topic in (("publisher", BuiltinTopicDcpsPublication), ("subscription", BuiltinTopicDcpsSubscription)):
             reader = BuiltinDataReader(self.participant, topic)
@@ -110,7 +159,7 @@ class DdsNode(NodeBase):
         return known, cls, full
 
     @staticmethod
-    def _qos(profile: Qos, writer: bool) -> Any:
+    def _qos(profile: Qos, writer: bool, type_name: str) -> Any:
         from cyclonedds.core import Policy, Qos as DdsQos
         from cyclonedds.util import duration
 
@@ -118,6 +167,7 @@ class DdsNode(NodeBase):
             Policy.Reliability.Reliable(duration(milliseconds=100)) if profile.reliable else Policy.Reliability.BestEffort,
             Policy.History.KeepLast(profile.depth),
             Policy.Durability.TransientLocal if profile.transient_local else Policy.Durability.Volatile,
+            Policy.Userdata(endpoint_user_data(type_name)),
         ]
         if writer:  # as rmw_cyclonedds: XCDR1, no dispose when a writer goes away
             policies += [Policy.DataRepresentation(use_cdrv0_representation=True),
@@ -130,8 +180,10 @@ class DdsNode(NodeBase):
         from ..interfaces import normalise
 
         dds_topic, cls, full = self._topic(type_name, topic, "publisher", qos)
-        writer = DataWriter(self.participant, dds_topic, qos=self._qos(qos, writer=True))
+        writer = DataWriter(self.participant, dds_topic, qos=self._qos(qos, True, type_name))
         self._writers.append(writer)
+        self._gids["writer"].append(gid(writer.guid))
+        self._publish_graph(with_node=True)
 
         def publish(msg: Any) -> None:
             if type(msg) is not cls:
@@ -154,14 +206,16 @@ class DdsNode(NodeBase):
         from cyclonedds.sub import DataReader
 
         dds_topic, cls, full = self._topic(type_name, topic, "subscription", qos)
-        reader = DataReader(self.participant, dds_topic, qos=self._qos(qos, writer=False))
+        reader = DataReader(self.participant, dds_topic, qos=self._qos(qos, False, type_name))
         condition = ReadCondition(reader, SampleState.Any | ViewState.Any | InstanceState.Any)
         entry = _Reader(reader, callback, cls, condition, qos.depth)
         self._readers.append(entry)
         self._waitset.attach(condition)
         self._track("subscription", full, type_name, qos)
+        self._gids["reader"].append(gid(reader.guid))
+        self._publish_graph(with_node=True)
 
-        def cancel() -> None:
+        def cancel() -> None:  # stops the callbacks; the DDS reader stays until the node goes
             if entry.active:
                 entry.active = False
                 self._waitset.detach(condition)
@@ -177,6 +231,32 @@ class DdsNode(NodeBase):
             timer.cancelled = True
 
         return Handle(cancel)
+
+    # -- graph introspection (ros_discovery_info) -----------------------------------
+    def _discovery_writer(self) -> Any:
+        from cyclonedds.pub import DataWriter
+        from cyclonedds.topic import Topic
+
+        from ..interfaces import message_class
+
+        topic = Topic(self.participant, DISCOVERY_TOPIC, message_class(DISCOVERY_TYPE))
+        return DataWriter(self.participant, topic, qos=self._qos(DISCOVERY_QOS, True, DISCOVERY_TYPE))
+
+    def graph_info(self, with_node: bool = True) -> Any:
+        """This participant's ``ParticipantEntitiesInfo``: its GID and its node (unless ``with_node`` is
+        false: the message of a node being destroyed) with the GIDs of the node's readers and writers."""
+        from ..interfaces import make
+
+        nodes = []
+        if with_node:
+            nodes.append(make("rmw_dds_common/msg/NodeEntitiesInfo", node_namespace=self.namespace, node_name=self.name,
+                              reader_gid_seq=[make("rmw_dds_common/msg/Gid", data=g) for g in self._gids["reader"]],
+                              writer_gid_seq=[make("rmw_dds_common/msg/Gid", data=g) for g in self._gids["writer"]]))
+        return make(DISCOVERY_TYPE, gid=make("rmw_dds_common/msg/Gid", data=gid(self.participant.guid)),
+                    node_entities_info_seq=nodes)
+
+    def _publish_graph(self, with_node: bool) -> None:
+        self._graph_writer.write(self.graph_info(with_node))
 
     # -- discovery checks ----------------------------------------------------------
     def _check_discovered(self, fresh: bool = False) -> list[tuple[str, Any]]:
@@ -334,6 +414,13 @@ class DdsNode(NodeBase):
     def _release(self) -> None:
         """Delete the DDS entities."""
         participant = self.participant
+        try:  # as rmw_destroy_node: announce the node gone before the participant goes (bounded wait for acks)
+            self._publish_graph(with_node=False)
+            from cyclonedds.util import duration
+
+            self._graph_writer.wait_for_acks(duration(milliseconds=200))
+        except Exception:  # noqa: BLE001 - the participant is deleted below in any case
+            pass
         # deleting the participant deletes its readers, writers, topics and waitset in Cyclone DDS
         participant.__del__()
         self._readers, self._writers, self._topics, self._discovery = [], [], {}, []
