@@ -123,3 +123,17 @@ def test_relaxed_cases_give_the_mpc_a_real_share(config: Config, name: str) -> N
     s = run(config, name)
     assert_safe(s)
     assert s["mean_weight_mpc"] >= 0.3
+
+
+def test_a_deliberate_friction_mismatch_is_the_stacks_belief_only(tmp_path: Any) -> None:
+    """--mu-estimate: the stack plans with its μ (ν, bounds), the road keeps the scenario's; both reported."""
+    import json
+
+    from moose.cli import main
+
+    out = tmp_path / "s.json"
+    assert main(["simulate", "--scenario", "paper_v7_tau1.4", "--duration", "2", "--mu-estimate", "0.8", "--no-bag",
+                 "--json", str(out)]) in (0, 1, 3)
+    s = json.loads(out.read_text())
+    assert s["mu"] == PAPER_FRICTION and s["mu_planning"] == 0.8
+    assert s["nu"] == pytest.approx(0.45, abs=0.03)  # the ν the stack believes: the 0.8 road's (calibration table)

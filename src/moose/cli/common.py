@@ -33,7 +33,9 @@ def add_scenario_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--duration", type=positive_float, help="simulated seconds after the obstacle appears")
     group.add_argument("--config", help="ROS 2 parameter file (default config/moose.yaml)")
     group.add_argument("--planner", choices=["combined", "mpc", "msf"], help="planner driving the car")
-    group.add_argument("--mu", type=positive_float, help="friction coefficient of the plant")
+    group.add_argument("--mu", type=positive_float, help="friction coefficient of the road (the plant's)")
+    group.add_argument("--mu-estimate", type=positive_float,
+                       help="friction the stack assumes, when it differs from the road's (a robustness experiment)")
     group.add_argument("--seed", type=int, default=0, help="seed of the sensor noise")
 
 
@@ -60,6 +62,15 @@ def scenario_from_args(args: Any) -> Any:
     if args.mu is not None:
         changes["mu"] = args.mu
     return dataclasses.replace(scenario, **changes) if changes else scenario
+
+
+def configure(config: Any, args: Any) -> Any:
+    """``config`` with the arguments that change it: ``--mu-estimate`` sets ``planning.mu_estimate``."""
+    import dataclasses
+
+    if getattr(args, "mu_estimate", None) is None:
+        return config
+    return dataclasses.replace(config, planning=dataclasses.replace(config.planning, mu_estimate=args.mu_estimate))
 
 
 def run_folder(scenario: str, planner: str) -> Path:

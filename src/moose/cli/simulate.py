@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any, Callable, Optional
 
 from ..params import ParamError
-from .common import add_scenario_arguments, run_folder, scenario_from_args
+from .common import add_scenario_arguments, configure, run_folder, scenario_from_args
 from .plugins import recorder
 
 
@@ -73,7 +73,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
     record = bag_recorder(args)
     scenario = scenario_from_args(args)
-    config = load_config(args.config)
+    config = configure(load_config(args.config), args)
     result = simulate(config, scenario, planner=args.planner, seed=args.seed)
     summary = summarize(result)
     print(format_summary(summary))

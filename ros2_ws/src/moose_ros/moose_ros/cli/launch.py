@@ -44,6 +44,8 @@ def cmd_launch(args: argparse.Namespace) -> int:
     params = {k: getattr(args, k) for k in scenario_fields if getattr(args, k) is not None}
     params.update({f"can_{k}": getattr(args, f"can_{k}") for k in ("interface", "channel", "port")
                    if getattr(args, f"can_{k}") is not None})
+    if args.mu_estimate is not None:  # the friction every node assumes: one value for the whole graph
+        params["planning.mu_estimate"] = args.mu_estimate
     planner = planner_mode(args.planner, args.config)
     bag = None if args.no_bag else (Path(args.bag) if args.bag else run_folder(scenario.name, planner) / "bag")
     try:
