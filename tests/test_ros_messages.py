@@ -139,3 +139,30 @@ def test_make_names_unknown_fields_and_publish_values_normalise() -> None:
     normalise(msg)
     assert msg.accel_x == [0.0, 1.0, 2.0] and type(msg.iterations) is int and type(msg.cost) is float
     assert bytes(msg.serialize()) == bytes(typestore().serialize_cdr(to_rosbags(msg), "moose_msgs/msg/PlannerOutput"))
+
+
+def test_core_records_survive_their_messages() -> None:
+    """What a node publishes is what the next node computes with: every field of the core's records goes
+    through its message unchanged (the weight function's ρ needs the MPC plan's predicted velocities)."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from moose.signals import Obstacle, PlanResult, StateEstimate, Threat
+    from moose_ros import convert as cv
+    from moose_ros.interfaces import make
+
+    node = SimpleNamespace(make=make)
+    rng = np.random.default_rng(0)
+    plan = PlanResult(accel=rng.normal(size=(10, 2)), status="capped", iterations=7, solve_time_s=0.001, cost=3.5,
+                      predicted=rng.normal(size=(11, 4)))
+    msg = cv.plan_to_msg(node, 1.25, "mpc", plan, True)
+    assert msg.with_threat is True
+    back = cv.plan_from_msg(msg)
+    np.testing.assert_array_equal(back.accel, plan.accel)
+    np.testing.assert_array_equal(back.predicted, plan.predicted)
+    assert (back.status, back.iterations, back.solve_time_s, back.cost) == ("capped", 7, 0.001, 3.5)
+    estimate = StateEstimate(1.25, 1.0, -2.0, 0.1, 6.0, 0.2, 0.3, 0.05)
+    assert cv.estimate_from_msg(cv.estimate_to_msg(node, estimate)) == estimate
+    threat = Threat(1.25, Obstacle(19.0, 21.0, -2.0, 2.4), 3.0, 2.4, 0.23, 1, 0.1)
+    assert cv.threat_from_msg(cv.threat_to_msg(node, 1.25, threat)) == threat

@@ -84,20 +84,23 @@ def threat_from_msg(msg: Any) -> Optional[Threat]:
     return Threat(time_of(msg), obstacle_from_msg(msg.obstacle), msg.tau, msg.w, msg.nu, int(msg.side), msg.y_path)
 
 
-def plan_to_msg(node: Any, t: float, planner: str, plan: PlanResult) -> Any:
+def plan_to_msg(node: Any, t: float, planner: str, plan: PlanResult, with_threat: bool) -> Any:
+    """A planner's answer at ``t``; ``with_threat``: it was planned against a reported threat."""
     msg = node.make("moose_msgs/msg/PlannerOutput")
     stamp(msg, t)
     msg.planner, msg.status, msg.iterations = planner, STATUS_CODES[plan.status], int(plan.iterations)
+    msg.with_threat = bool(with_threat)
     msg.solve_time, msg.cost = float(plan.solve_time_s), float(plan.cost) if math.isfinite(plan.cost) else 1e300
     msg.accel_x, msg.accel_y = [float(v) for v in plan.accel[:, 0]], [float(v) for v in plan.accel[:, 1]]
-    msg.predicted_x, msg.predicted_y = [float(v) for v in plan.predicted[:, 0]], [float(v) for v in plan.predicted[:, 1]]
+    msg.predicted_x, msg.predicted_y, msg.predicted_vx, msg.predicted_vy = (
+        [float(v) for v in plan.predicted[:, i]] for i in range(4))
     return msg
 
 
 def plan_from_msg(msg: Any) -> PlanResult:
     accel = np.column_stack([np.asarray(msg.accel_x, float), np.asarray(msg.accel_y, float)])
-    predicted = np.zeros((len(msg.predicted_x), 4))
-    predicted[:, 0], predicted[:, 1] = msg.predicted_x, msg.predicted_y
+    predicted = np.column_stack([np.asarray(getattr(msg, f), float)
+                                 for f in ("predicted_x", "predicted_y", "predicted_vx", "predicted_vy")])
     cost = msg.cost if msg.cost < 1e299 else math.inf
     return PlanResult(accel, STATUS_NAMES[int(msg.status)], int(msg.iterations), msg.solve_time, cost, predicted)  # type: ignore[arg-type]
 

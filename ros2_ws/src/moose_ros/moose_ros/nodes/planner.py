@@ -15,7 +15,8 @@ from .base import OK, WARN, GraphNode
 
 
 class Planner(GraphNode):
-    """MPC or MSF planner at the planning rate (5 Hz), and at once on a new obstacle."""
+    """MPC or MSF planner at the planning rate (5 Hz), and at once on a new obstacle, which restarts the
+    planning period (:func:`moose.planning.new_obstacle`, as in the lockstep loop)."""
 
     kind = ""
 
@@ -30,7 +31,10 @@ class Planner(GraphNode):
         self.pub = PLANS[self.kind].publisher(rt)
         STATE.subscription(rt, lambda m: setattr(self, "estimate", cv.estimate_from_msg(m)))
         THREAT.subscription(rt, self.on_threat)
-        rt.timer(1.0 / self.config.planning_rate_hz, self.plan)
+        self.period = self.config.planning.t_s
+        self.next_plan = 0.0
+        """Time of the next planning instant: every t_s, restarted by a new obstacle (as the lockstep loop)."""
+        rt.timer(1.0 / self.config.simulation.motion_rate_hz, self.on_tick)
 
     def make_planner(self) -> Any:
         raise NotImplementedError
@@ -40,23 +44,36 @@ class Planner(GraphNode):
         replan = new_obstacle(self.threat, threat)
         self.threat = threat
         self.detected = self.detected or threat is not None
-        if replan:
-            self.plan()
+        if replan:  # at the detection's instant (the threat's stamp); the planning period restarts there
+            self.plan(cv.time_of(msg))
+            self.next_plan = cv.time_of(msg) + self.period
+
+    def on_tick(self) -> None:
+        """The motion-rate tick: plan when the planning instant is due, stamped with the instant itself, so
+        that both planners' plans of one instant carry one stamp even when a tick runs late (instants a
+        stalled node missed entirely are skipped, not made up)."""
+        now = self.rt.now()
+        if now >= self.next_plan - 1e-6:
+            instant = self.next_plan
+            while self.next_plan <= now + 1e-6:
+                self.next_plan += self.period
+            self.plan(instant if now - instant < self.period else now)
 
     @property
     def v_des(self) -> float:
         """The ``v_des`` parameter, else the scenario's: the approach speed until detection, then its v_des."""
         return self.params.v_des if self.params.v_des is not None else self.scenario.desired_speed(self.detected)
 
-    def plan(self) -> None:
+    def plan(self, t: Optional[float] = None) -> None:
+        """Plan at ``t`` (default: now) from the newest estimate."""
         if self.estimate is None:
             return
-        t = self.rt.now()
+        t = self.rt.now() if t is None else t
         inp = PlannerInput(t, self.estimate, self.threat, self.v_des, self.guess, y_lane=0.0)
         result = self.planner.plan(inp)
         self.values = {"status": result.status, "solve_ms": f"{result.solve_time_s * 1e3:.2f}"}
         self.level = OK if result.status in ("converged", "capped", "ok", "idle") else WARN
-        self.pub(cv.plan_to_msg(self.rt, t, self.kind, result))
+        self.pub(cv.plan_to_msg(self.rt, t, self.kind, result, self.threat is not None))
 
 
 class MpcPlannerNode(Planner):

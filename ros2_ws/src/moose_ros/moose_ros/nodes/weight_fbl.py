@@ -30,8 +30,10 @@ class WeightFbl(GraphNode):
         self.mpc_timeout = self.params.mpc_timeout
         self.estimate: Optional[StateEstimate] = None
         self.threat: Optional[Threat] = None
-        self.pending: dict[str, tuple[float, Any]] = {}
-        self.last_mpc = -math.inf
+        self.pending: dict[str, tuple[float, bool, Any]] = {}
+        """The newest plan of each planner: (stamp, planned against a threat, plan)."""
+        self.blended = -math.inf
+        """Stamp of the last blended instant."""
         self.pub_blend = BLEND.publisher(rt)
         self.pub_ref = REFERENCE.publisher(rt)
         self.pub_markers = MARKERS.publisher(rt)
@@ -41,30 +43,35 @@ class WeightFbl(GraphNode):
         PLAN_MSF.subscription(rt, lambda m: self.on_plan("msf", m))
 
     def on_plan(self, kind: str, msg: Any) -> None:
-        self.pending[kind] = (cv.time_of(msg), cv.plan_from_msg(msg))
-        if kind == "mpc":
-            self.last_mpc = self.rt.now()
+        t = cv.time_of(msg)
+        if t < self.blended - 1e-6:
+            return  # a plan for an instant already blended without it (it came too late)
+        self.pending[kind] = (t, bool(msg.with_threat), cv.plan_from_msg(msg))
         self.try_blend()
 
     def try_blend(self) -> None:
-        """Combine when the mode's plans of one instant are here (or the MPC stayed silent past its deadline)."""
+        """Combine when the mode's plans of one instant are here; in ``combined`` mode, without the MPC's when
+        it has not come ``mpc_timeout`` after the MSF plan's instant (late, failed or silent: weight 0)."""
         if self.estimate is None:
             return
         mpc, msf = self.pending.get("mpc"), self.pending.get("msf")
         silent = False
         if self.mode == "mpc" and mpc:
-            t, plans = mpc[0], (mpc[1], None)
+            t, plans = mpc[0], (mpc[2], None)
         elif self.mode == "msf" and msf:
-            t, plans = msf[0], (None, msf[1])
-        elif self.mode == "combined" and msf and mpc and abs(mpc[0] - msf[0]) < 1e-6:
-            t, plans = msf[0], (mpc[1], msf[1])
-        elif self.mode == "combined" and msf and self.rt.now() - self.last_mpc > self.mpc_timeout + 0.2:
-            t, plans, silent = msf[0], (None, msf[1]), True  # the MPC is silent: weight 0, and say so
+            t, plans = msf[0], (None, msf[2])
+        elif self.mode == "combined" and msf and mpc and abs(mpc[0] - msf[0]) < 1e-6 and mpc[1] == msf[1]:
+            # the two plans of one instant, made against the same threat (a planner that planned on its
+            # timer just before the threat arrived re-plans at the same stamp: wait for that plan)
+            t, plans = msf[0], (mpc[2], msf[2])
+        elif self.mode == "combined" and msf and self.rt.now() >= msf[0] + self.mpc_timeout - 1e-9:
+            t, plans, silent = msf[0], (None, msf[2]), True  # no MPC plan for this instant in time: weight 0
         else:
             return
         record = self.step.combine(t, self.estimate, self.threat, *plans)
-        self.level, self.message = (WARN, "mpc_planner silent: MSF only") if silent else (OK, "running")
+        self.level, self.message = (WARN, "mpc_planner late or silent: MSF only") if silent else (OK, "running")
         self.pending.clear()
+        self.blended = t
         self.values = {"weight_mpc": f"{record.blend.weight_mpc:.3f}"}
         self.pub_blend(cv.blend_to_msg(self.rt, t, record.blend, record.reference, record.delta_mpc))
         self.pub_ref(cv.reference_to_msg(self.rt, t, record.reference))
