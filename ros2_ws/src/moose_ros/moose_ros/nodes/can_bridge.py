@@ -9,6 +9,7 @@ import can
 from moose.canbus.bridge import BridgeCore
 from moose.canbus.bus import DEFAULT_GROUP
 from moose.canbus.safety import Command, GuardParams
+from moose.signals import ActuatorCommand
 
 from ..graph import ACTUATOR_COMMAND
 from .base import ERROR, OK, WARN, GraphNode, sensor_publishers
@@ -37,7 +38,7 @@ class CanBridge(GraphNode):
         self.open()
         self.logger = can.Logger(self.params.can_log) if self.params.can_log else None
         self.pub = sensor_publishers(rt)
-        ACTUATOR_COMMAND.subscription(rt, self.on_command)
+        self.subscribe(ACTUATOR_COMMAND, self.on_command)
         rt.timer(0.01, self.tick)
 
     def open(self) -> None:
@@ -51,8 +52,9 @@ class CanBridge(GraphNode):
             self.level, self.message = ERROR, f"bus {p.can_interface}:{p.can_channel or DEFAULT_GROUP} unavailable: {exc}"
             self.reopen_at = time.monotonic() + 1.0
 
-    def on_command(self, msg: Any) -> None:
-        self.bridge.on_command(Command(msg.steering_angle, msg.steering_rate, msg.torque_rl, msg.torque_rr), self.rt.now())
+    def on_command(self, command: ActuatorCommand) -> None:
+        c = command
+        self.bridge.on_command(Command(c.steering_angle, c.steering_rate, c.torque_rl, c.torque_rr), self.rt.now())
 
     def tick(self) -> None:
         if self.bus is None:

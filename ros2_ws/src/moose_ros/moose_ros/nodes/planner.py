@@ -6,7 +6,7 @@ from typing import Any, Optional
 import numpy as np
 
 from moose.planning import new_obstacle
-from moose.signals import Blend, PlannerInput, StateEstimate, Threat
+from moose.signals import PlannerInput, StateEstimate, Threat
 from moose.weight import WeightFunction
 
 from .. import convert as cv
@@ -28,15 +28,14 @@ class Planner(GraphNode):
         self.detected = False
         self.guess: Optional[np.ndarray] = None
         self.pub = PLANS[self.kind].publisher(rt)
-        STATE.subscription(rt, lambda m: setattr(self, "estimate", cv.estimate_from_msg(m)))
-        THREAT.subscription(rt, self.on_threat)
+        self.subscribe(STATE, lambda estimate: setattr(self, "estimate", estimate))
+        self.subscribe(THREAT, self.on_threat)
         rt.timer(1.0 / self.config.planning_rate_hz, self.plan)
 
     def make_planner(self) -> Any:
         raise NotImplementedError
 
-    def on_threat(self, msg: Any) -> None:
-        threat = cv.threat_from_msg(msg)
+    def on_threat(self, threat: Optional[Threat]) -> None:
         replan = new_obstacle(self.threat, threat)
         self.threat = threat
         self.detected = self.detected or threat is not None
@@ -66,8 +65,7 @@ class MpcPlannerNode(Planner):
 
     def __init__(self, rt: Any) -> None:
         super().__init__(rt)
-        BLEND.subscription(rt, lambda m: setattr(
-            self, "guess", WeightFunction.next_initial_guess(Blend(m.weight_mpc, cv.blend_accel(m)))))
+        self.subscribe(BLEND, lambda blend: setattr(self, "guess", WeightFunction.next_initial_guess(blend)))
 
     def make_planner(self) -> Any:
         from moose.mpc import MpcPlanner

@@ -9,7 +9,7 @@ import math
 from typing import Any, Optional
 
 from moose.planning import PlanningStep
-from moose.signals import StateEstimate, Threat
+from moose.signals import PlanResult, StateEstimate, Threat
 
 from .. import convert as cv
 from ..graph import BLEND, PLAN_MPC, PLAN_MSF, REFERENCE, STATE, THREAT
@@ -33,13 +33,13 @@ class WeightFbl(GraphNode):
         self.last_mpc = -math.inf
         self.pub_blend = BLEND.publisher(rt)
         self.pub_ref = REFERENCE.publisher(rt)
-        STATE.subscription(rt, self.on_state)
-        THREAT.subscription(rt, lambda m: setattr(self, "threat", cv.threat_from_msg(m)))
-        PLAN_MPC.subscription(rt, lambda m: self.on_plan("mpc", m))
-        PLAN_MSF.subscription(rt, lambda m: self.on_plan("msf", m))
+        self.subscribe(STATE, self.on_state)
+        self.subscribe(THREAT, lambda threat: setattr(self, "threat", threat))
+        self.subscribe(PLAN_MPC, lambda plan: self.on_plan("mpc", plan))
+        self.subscribe(PLAN_MSF, lambda plan: self.on_plan("msf", plan))
 
-    def on_plan(self, kind: str, msg: Any) -> None:
-        self.pending[kind] = (cv.time_of(msg), cv.plan_from_msg(msg))
+    def on_plan(self, kind: str, plan: tuple[float, PlanResult]) -> None:
+        self.pending[kind] = plan
         if kind == "mpc":
             self.last_mpc = self.rt.now()
         self.try_blend()
@@ -67,8 +67,8 @@ class WeightFbl(GraphNode):
         self.pub_blend(cv.blend_to_msg(self.rt, t, record.blend, record.reference))
         self.pub_ref(cv.reference_to_msg(self.rt, t, record.reference))
 
-    def on_state(self, msg: Any) -> None:
-        self.estimate = cv.estimate_from_msg(msg)
+    def on_state(self, estimate: StateEstimate) -> None:
+        self.estimate = estimate
         if "msf" in self.pending and self.mode == "combined":
             self.try_blend()
         reference = self.step.reference_between(self.estimate)
