@@ -167,6 +167,42 @@ def test_a_bag_cut_inside_its_first_chunk_still_gives_the_complete_messages(tmp_
     assert report.lost_bytes > 0
 
 
+def corrupt_first_chunk(bag: Path, record: int = 100) -> int:
+    """Give the ``record``-th record inside the first chunk a length far beyond the chunk (its checksum then fails);
+    returns the chunk's offset in the file."""
+    import struct
+
+    mcap = next(bag.glob("*.mcap"))
+    with open(mcap, "rb") as handle:
+        first = make_reader(handle).get_summary().chunk_indexes[0]
+    data = bytearray(mcap.read_bytes())
+    head = first.chunk_start_offset + 1 + 8 + 8 + 8 + 8 + 4
+    (name_length,) = struct.unpack_from("<I", data, head)
+    position = head + 4 + name_length + 8
+    for _ in range(record):
+        position += 9 + struct.unpack_from("<Q", data, position + 1)[0]
+    struct.pack_into("<Q", data, position + 1, 2**40)
+    mcap.write_bytes(bytes(data))
+    return first.chunk_start_offset
+
+
+@pytest.mark.parametrize("metadata", [True, False])
+def test_a_corrupt_chunk_is_reported_and_reading_goes_on_after_it(tmp_path: Path, metadata: bool) -> None:
+    bag = chunked(tmp_path / "bag")
+    offset = corrupt_first_chunk(bag)
+    if not metadata:
+        (bag / "metadata.yaml").unlink()
+    report = ReadReport(str(bag))
+    messages = list(read_bag(bag, report=report))
+    original = [(m.topic, m.timestamp_ns) for m in read_bag(EXTREME)]
+    got = [(m.topic, m.timestamp_ns) for m in messages]
+    assert got[-1] == original[-1] and set(got) < set(original)  # past the corrupt chunk, to the end of the bag
+    assert report.suspect == [f"chunk at byte {offset}"] and report.lost_bytes > 500_000
+    assert sum(report.missing.values()) == (TOTAL - len(messages) if metadata else 0)
+    out = run("bag", "info", str(bag))
+    assert out.returncode == 1 and "fails its checksum" in out.stderr and "byte(s) of records are unreadable" in out.stderr
+
+
 def test_damaged_files_give_errors_that_say_why(tmp_path: Path) -> None:
     bag = cut(chunked(tmp_path / "bag"), 200, metadata=False)  # inside the first chunk's header
     with pytest.raises(BagError, match=r"truncated before its first complete chunk or channel: \d+ of 200 bytes"):

@@ -7,13 +7,15 @@ deliver and why:
   or ``ros2idl``, as rosbags' AnyReader does), and so is a known type that the bag recorded with another
   definition (its RIHS01 hash differs).  A message that still cannot be decoded (no definition, corrupt
   CDR) is skipped, counted per topic and reported; reading goes on.
-- **Truncated files**: a bag with ``metadata.yaml`` is read with rosbags' public
+- **Truncated or corrupt files**: a bag with ``metadata.yaml`` is read with rosbags' public
   :class:`rosbags.rosbag2.Reader`; the messages it could not deliver are those ``metadata.yaml`` counts
-  and the files no longer hold (reported per topic, with the bytes after the last complete record).  A
-  bag without it (a recorder killed before closing the bag), or whose metadata is unreadable, is
-  streamed record by record with the ``mcap`` library's public
-  :class:`~mcap.stream_reader.StreamReader`: every complete record is kept (for chunked files, every
-  complete chunk), and the bytes after the last complete record are reported as lost.
+  and the files no longer hold (reported per topic, with the unreadable bytes).  A bag without it (a
+  recorder killed before closing the bag), whose metadata or index is unreadable, or whose index fails
+  before the first message, is streamed record by record with the ``mcap`` library's public
+  :class:`~mcap.stream_reader.StreamReader`: every complete record is kept; chunks are parsed strictly
+  here (each record read to its exact length) and their checksums checked; the complete records at the
+  start of a cut or corrupt chunk are kept; a corrupt record is skipped and reading resumes after it.
+  Unreadable bytes and chunks whose checksum fails are reported.
 - **A topic filter naming a topic the bag does not have** is a :class:`BagError` listing the bag's topics
   (rosbags reads *every* topic when given an empty selection).
 """
@@ -52,11 +54,14 @@ class ReadReport:
     missing: dict[str, int] = dataclasses.field(default_factory=dict)
     """Messages ``metadata.yaml`` counts that the files no longer hold, by topic."""
     lost_bytes: int = 0
-    """Bytes after the last complete record of truncated files (their messages are lost)."""
+    """Bytes of records that could not be read: after the last complete record of a truncated file, a corrupt
+    record skipped, the unparsable rest of a chunk (counted in its uncompressed bytes)."""
     registered: list[str] = dataclasses.field(default_factory=list)
     """Types decoded with the definitions embedded in the bag."""
     recovered: str = ""
     """Why the bag was read record by record instead of through its index (``""``: it was not)."""
+    suspect: list[str] = dataclasses.field(default_factory=list)
+    """Chunks whose checksum does not match: their messages were read, but may carry corrupt data."""
 
     def skip(self, topic: str, type_name: str, reason: str) -> None:
         entry = self.skipped.setdefault(topic, {"type": type_name, "count": 0, "reason": reason})
@@ -65,7 +70,7 @@ class ReadReport:
     @property
     def complete(self) -> bool:
         """Whether every message of the bag was delivered."""
-        return not (self.skipped or self.missing or self.lost_bytes)
+        return not (self.skipped or self.missing or self.lost_bytes or self.suspect)
 
     def losses(self) -> list[str]:
         """One line per loss (empty when :attr:`complete`)."""
@@ -76,8 +81,10 @@ class ReadReport:
             lines.append(f"bag {self.path!r}: {sum(self.missing.values())} message(s) that metadata.yaml lists are "
                          f"missing from its files (truncated or corrupt): {per_topic}")
         if self.lost_bytes:
-            lines.append(f"bag {self.path!r}: {self.lost_bytes} byte(s) after the last complete record are unreadable "
-                         "(a truncated file); their messages are lost")
+            lines.append(f"bag {self.path!r}: {self.lost_bytes} byte(s) of records are unreadable (a truncated or "
+                         "corrupt file); their messages are lost")
+        lines += [f"bag {self.path!r}: the {where} fails its checksum; its messages were read but may be corrupt"
+                  for where in self.suspect]
         return lines
 
 
@@ -163,6 +170,69 @@ class _Stream:
     messages: list[tuple[int, int, bytes]]
     """(channel id, log time, CDR)."""
     lost_bytes: int
+    suspect: list[int]
+    """File offsets of chunks whose checksum does not match their records."""
+
+
+def _records(data: bytes) -> tuple[list[Any], int]:
+    """The schema, channel and message records at the start of a chunk's (uncompressed) records, parsed strictly:
+    a record must fit in ``data`` and be read to its exact length.  A complete record that does not parse is
+    skipped.  Returns the records and how many bytes of ``data`` they and the skipped ones span (up to the first
+    record that does not fit)."""
+    from io import BytesIO
+
+    from mcap.data_stream import ReadDataStream
+    from mcap.opcode import Opcode
+    from mcap.records import Channel, Message, Schema
+
+    records: list[Any] = []
+    position = 0
+    while position + 9 <= len(data):
+        opcode, length = data[position], int.from_bytes(data[position + 1:position + 9], "little")
+        if position + 9 + length > len(data):
+            break
+        body = data[position + 9:position + 9 + length]
+        stream = ReadDataStream(BytesIO(body))
+        try:
+            if opcode == Opcode.MESSAGE and length >= 22:
+                records.append(Message.read(stream, length))
+            elif opcode == Opcode.SCHEMA:
+                records.append(Schema.read(stream))
+            elif opcode == Opcode.CHANNEL:
+                records.append(Channel.read(stream))
+        except Exception:  # noqa: BLE001 - a corrupt record: skipped, the next one is read
+            pass
+        position += 9 + length
+    return records, position
+
+
+def _decompress(compression: str, data: bytes, size: Optional[int] = None) -> Optional[bytes]:
+    """A chunk's records, decompressed as far as ``data`` goes (None: an unknown compression or corrupt data)."""
+    try:
+        if compression == "zstd":
+            import zstandard
+
+            return zstandard.ZstdDecompressor().decompressobj().decompress(data)
+        if compression == "lz4":
+            import lz4.frame
+
+            return lz4.frame.LZ4FrameDecompressor().decompress(data)
+    except Exception:  # noqa: BLE001 - corrupt data: nothing to recover
+        return None
+    return data if not compression else None
+
+
+def _chunk(chunk: Any) -> tuple[list[Any], int, bool]:
+    """The records of a complete chunk record, the bytes of its records that could not be read, and whether its
+    checksum holds (a mismatch: the records read may carry corrupt data)."""
+    import zlib
+
+    data = _decompress(chunk.compression, chunk.data)
+    if data is None:
+        return [], chunk.uncompressed_size or len(chunk.data), False
+    records, good = _records(data)
+    intact = chunk.uncompressed_crc == 0 or zlib.crc32(data) == chunk.uncompressed_crc
+    return records, len(data) - good, intact
 
 
 def _partial_chunk(tail: bytes) -> tuple[list[Any], int]:
@@ -170,95 +240,81 @@ def _partial_chunk(tail: bytes) -> tuple[list[Any], int]:
     uncompressed, zstd or lz4), and how many bytes of ``tail`` they span (0 for a compressed chunk: the
     compressed bytes they came from are not known, so the whole chunk counts as lost)."""
     import struct
-    from io import BytesIO
 
-    from mcap.data_stream import ReadDataStream
-    from mcap.exceptions import McapError
     from mcap.opcode import Opcode
-    from mcap.records import Channel, Message, Schema
 
     head = 1 + 8 + 8 + 8 + 8 + 4  # opcode, length, start and end time, uncompressed size, crc
     if len(tail) < head + 4 or tail[0] != Opcode.CHUNK:
         return [], 0
     (name_length,) = struct.unpack_from("<I", tail, head)
     start = head + 4 + name_length + 8  # the compression's name, then the records' length
-    compression, data = tail[head + 4:head + 4 + name_length].decode("utf-8", "replace"), tail[start:]
-    try:
-        if compression == "zstd":
-            import zstandard
-
-            data = zstandard.ZstdDecompressor().decompressobj().decompress(data)
-        elif compression == "lz4":
-            import lz4.frame
-
-            data = lz4.frame.LZ4FrameDecompressor().decompress(data)
-        elif compression:
-            return [], 0
-    except Exception:  # noqa: BLE001 - a corrupt or unsupported stream: nothing to recover
+    compression = tail[head + 4:head + 4 + name_length].decode("utf-8", "replace")
+    data = _decompress(compression, tail[start:])
+    if data is None:
         return [], 0
-    stream, records, good = ReadDataStream(BytesIO(data)), [], 0
-    readers = {Opcode.SCHEMA: Schema.read, Opcode.CHANNEL: Channel.read}
-    while True:
-        try:
-            opcode, length = stream.read1(), stream.read8()
-            begin = stream.count
-            if opcode == Opcode.MESSAGE:
-                record = Message.read(stream, length)
-            elif opcode in readers:
-                record = readers[opcode](stream)
-            else:
-                record = None
-            stream.read(length - (stream.count - begin))
-        except (McapError, EOFError, ValueError, struct.error):
-            break
-        if record is not None:
-            records.append(record)
-        good = stream.count
+    records, good = _records(data)
     return records, (start + good if good and not compression else 0)
 
 
 def _stream(file: Path) -> _Stream:
-    """Every complete record of ``file`` (also at the start of a truncated chunk): no summary, index or footer
-    needed."""
-    from mcap.exceptions import McapError
-    from mcap.records import Channel, Message, Schema
+    """Every complete record of ``file``: no summary, index or footer needed.  Chunks are parsed strictly (a record
+    must be read to its exact length) and their checksums checked.  A record cut short (the end of a killed or
+    truncated file) gives up the complete records at its start (of a chunk); a corrupt record whose length still
+    fits in the file gives up what it can, is skipped, and reading resumes after it."""
+    from mcap.records import Channel, Chunk, Message, Schema
     from mcap.stream_reader import StreamReader
 
-    schemas: dict[int, tuple[str, str, str]] = {}
-    channels: dict[int, tuple[str, int]] = {}
-    messages: list[tuple[int, int, bytes]] = []
+    found = _Stream({}, {}, [], 0, [])
+
+    def keep(record: Any) -> None:
+        if isinstance(record, Schema):
+            found.schemas[record.id] = (record.name, record.encoding, bytes(record.data).decode("utf-8", "replace"))
+        elif isinstance(record, Channel):
+            found.channels[record.id] = (record.topic, record.schema_id)
+        elif isinstance(record, Message):
+            found.messages.append((record.channel_id, record.log_time, bytes(record.data)))
+
     size = file.stat().st_size
     with open(file, "rb") as handle:
-        counting = _Counting(handle)
-        end = 0
-        try:
-            for record in StreamReader(counting, skip_magic=False).records:  # type: ignore[arg-type]
-                if isinstance(record, Schema):
-                    schemas[record.id] = (record.name, record.encoding, bytes(record.data).decode("utf-8", "replace"))
-                elif isinstance(record, Channel):
-                    channels[record.id] = (record.topic, record.schema_id)
-                elif isinstance(record, Message):
-                    messages.append((record.channel_id, record.log_time, bytes(record.data)))
-                end = counting.count  # a record (a whole chunk, for chunked files) was read to its end
-            end = size
-        except (McapError, EOFError, ValueError, KeyError, AssertionError, OSError):
-            handle.seek(end)  # the file ends (or is corrupt) after ``end`` bytes: perhaps inside a chunk
-            records, span = _partial_chunk(handle.read())
+        position, resumed = 0, False
+        while True:
+            handle.seek(position)
+            counting = _Counting(handle)
+            end = position
+            try:
+                for record in StreamReader(counting, skip_magic=resumed, emit_chunks=True).records:  # type: ignore[arg-type]
+                    if isinstance(record, Chunk):
+                        records, unread, intact = _chunk(record)
+                        for inner in records:
+                            keep(inner)
+                        found.lost_bytes += unread
+                        if not intact:
+                            found.suspect.append(end)
+                    else:
+                        keep(record)
+                    end = position + counting.count  # a record (a whole chunk) was read to its end
+                break  # up to the footer: the file is complete
+            except Exception:  # noqa: BLE001 - a cut or corrupt file raises many kinds (mcap's, zstd's, struct's)
+                pass
+            if end == 0:
+                raise BagError(f"bag file {str(file)!r} is not a readable MCAP file ({size} bytes, no complete record)")
+            handle.seek(end)
+            head = handle.read(9)  # opcode and length of the record that failed
+            length = int.from_bytes(head[1:9], "little") if len(head) == 9 else size
+            whole = end + 9 + length <= size
+            handle.seek(end)
+            records, span = _partial_chunk(handle.read(9 + length if whole else size - end))
             for record in records:
-                if isinstance(record, Schema):
-                    schemas[record.id] = (record.name, record.encoding, bytes(record.data).decode("utf-8", "replace"))
-                elif isinstance(record, Channel):
-                    channels[record.id] = (record.topic, record.schema_id)
-                elif isinstance(record, Message):
-                    messages.append((record.channel_id, record.log_time, bytes(record.data)))
-            end += span
-    if end == 0 and not channels:
-        raise BagError(f"bag file {str(file)!r} is not a readable MCAP file ({size} bytes, no complete record)")
-    if not channels and not messages:
+                keep(record)
+            if not whole:  # cut short: the end of the file (an unfinished file ends right after a record: 0 lost)
+                found.lost_bytes += size - end - span
+                break
+            found.lost_bytes += 9 + length - span
+            position, resumed = end + 9 + length, True
+    if not found.channels and not found.messages:
         raise BagError(f"bag file {str(file)!r} is truncated before its first complete chunk or channel: "
-                       f"{size - end} of {size} bytes unreadable, no message can be recovered")
-    # an unfinished file (killed writer) ends exactly after its last record: nothing lost
-    return _Stream(schemas, channels, messages, size - end)
+                       f"{found.lost_bytes} of {size} bytes unreadable, no message can be recovered")
+    return found
 
 
 def _listed_counts(path: Path) -> dict[str, int]:
@@ -270,6 +326,10 @@ def _listed_counts(path: Path) -> dict[str, int]:
         return {e["topic_metadata"]["name"]: int(e["message_count"]) for e in info["topics_with_message_count"]}
     except Exception:  # noqa: BLE001 - no file, not YAML, another layout: nothing listed
         return {}
+
+
+class _IndexFailed(Exception):
+    """rosbags' indexed reading failed before it delivered a message: the files are streamed instead."""
 
 
 class BagReader:
@@ -286,7 +346,7 @@ class BagReader:
         self.topics: dict[str, str] = {}
         """Topic → message type, every topic of the bag."""
         self.counts: dict[str, Optional[int]] = {}
-        """Messages per topic that ``metadata.yaml`` lists (None: no metadata)."""
+        """Messages per topic that ``metadata.yaml`` lists (None: not listed)."""
         if (self.path / "metadata.yaml").is_file():
             from rosbags.rosbag2 import Reader
 
@@ -295,7 +355,7 @@ class BagReader:
                 reader.open()
                 self._indexed = reader
             except Exception as exc:  # noqa: BLE001 - rosbags raises many kinds; recover or explain below
-                if not sorted(self.path.glob("*.mcap")):
+                if not self._files():
                     raise BagError(f"bag {str(self.path)!r} is unreadable: {exc or type(exc).__name__}") from None
                 self.report.recovered = f"metadata.yaml or the index is unreadable ({exc or type(exc).__name__})"
         if self._indexed is not None:
@@ -303,14 +363,19 @@ class BagReader:
                 self.topics[c.topic] = c.msgtype
                 self.counts[c.topic] = (self.counts.get(c.topic) or 0) + c.msgcount
             return
-        files = sorted(self.path.glob("*.mcap")) if self.path.is_dir() else [self.path]
-        if not files:
+        if not self._files():
             raise BagError(f"bag {str(self.path)!r} has neither metadata.yaml nor an .mcap file")
         self.report.recovered = self.report.recovered or "no metadata.yaml (an unfinished bag)"
-        self._streams = [_stream(f) for f in files]
+        self._load_streams()
+
+    def _files(self) -> list[Path]:
+        return sorted(self.path.glob("*.mcap")) if self.path.is_dir() else [self.path]
+
+    def _load_streams(self) -> None:
+        self._streams = [_stream(f) for f in self._files()]
         for s in self._streams:
             for topic, schema in s.channels.values():
-                self.topics[topic] = s.schemas.get(schema, ("", "", ""))[0]
+                self.topics.setdefault(topic, s.schemas.get(schema, ("", "", ""))[0])
         listed = _listed_counts(self.path)
         self.counts = {t: listed.get(t) for t in set(self.topics) | set(listed)}
 
@@ -333,34 +398,55 @@ class BagReader:
 
     def messages(self, topics: Optional[Sequence[str]] = None) -> Iterator[BagMessage]:
         """The messages (of ``topics``, each of which the bag must have) in time order; what cannot be decoded is
-        skipped and counted in :attr:`report`, and so is what ``metadata.yaml`` lists but the files lack."""
+        skipped and counted in :attr:`report`, and so is what ``metadata.yaml`` lists but the files lack.
+
+        Through the index while it works; if it fails before the first message (a chunk whose checksum does
+        not match, a broken index), the files are streamed instead; if it fails later, :class:`BagError` says
+        after how many messages."""
         self.check(topics)
         wanted = set(topics) if topics else set(self.topics)
-        report = self.report
         if self._indexed is not None:
-            delivered: dict[str, int] = defaultdict(int)
-            connections = [c for c in self._indexed.connections if c.topic in wanted]
             try:
-                for connection, timestamp, raw in self._indexed.messages(connections=connections):
-                    fmt = connection.msgdef.format.name.lower()
-                    decoder = self._decoders.get(connection.msgtype, {"msg": "ros2msg", "idl": "ros2idl"}.get(fmt, fmt),
-                                                 connection.msgdef.data, connection.digest or None)
-                    msg, why = decode(decoder, raw)
-                    delivered[connection.topic] += 1
-                    if msg is None:
-                        report.skip(connection.topic, connection.msgtype, why)
-                        continue
-                    report.delivered += 1
-                    yield BagMessage(connection.topic, connection.msgtype, timestamp, msg)
-            except Exception as exc:  # noqa: BLE001 - a corrupt chunk or index: say where reading stopped
-                raise BagError(f"bag {str(self.path)!r} is unreadable after {report.delivered} messages: "
-                               f"{exc or type(exc).__name__}") from None
-            self._count_missing(wanted, delivered)
-            if report.missing:
-                report.lost_bytes = sum(_stream(f).lost_bytes for f in sorted(self.path.glob("*.mcap")))
-            return
-        found: list[tuple[int, int, str, str, Decoder, bytes]] = []
+                yield from self._indexed_messages(wanted)
+                return
+            except _IndexFailed as exc:
+                self.report.recovered = f"the index failed ({exc})"
+                self.close()
+                self._load_streams()
+        yield from self._streamed_messages(wanted, listed_too=not topics)
+
+    def _indexed_messages(self, wanted: set[str]) -> Iterator[BagMessage]:
+        report = self.report
+        delivered: dict[str, int] = defaultdict(int)
+        connections = [c for c in self._indexed.connections if c.topic in wanted]
+        try:
+            for connection, timestamp, raw in self._indexed.messages(connections=connections):
+                fmt = connection.msgdef.format.name.lower()
+                decoder = self._decoders.get(connection.msgtype, {"msg": "ros2msg", "idl": "ros2idl"}.get(fmt, fmt),
+                                             connection.msgdef.data, connection.digest or None)
+                msg, why = decode(decoder, raw)
+                delivered[connection.topic] += 1
+                if msg is None:
+                    report.skip(connection.topic, connection.msgtype, why)
+                    continue
+                report.delivered += 1
+                yield BagMessage(connection.topic, connection.msgtype, timestamp, msg)
+        except Exception as exc:  # noqa: BLE001 - a corrupt chunk or index: stream the files, or say where it stopped
+            why = str(exc) or type(exc).__name__
+            if not any(delivered.values()):
+                raise _IndexFailed(why) from None
+            raise BagError(f"bag {str(self.path)!r} is unreadable after {report.delivered} messages: {why}") from None
+        self._count_missing(wanted, delivered)
+        if report.missing:
+            streams = [_stream(f) for f in self._files()]
+            report.lost_bytes = sum(s.lost_bytes for s in streams)
+            report.suspect = [f"chunk at byte {o}" for s in streams for o in s.suspect]
+
+    def _streamed_messages(self, wanted: set[str], listed_too: bool) -> Iterator[BagMessage]:
+        report = self.report
         report.lost_bytes = sum(s.lost_bytes for s in self._streams)
+        report.suspect = [f"chunk at byte {o}" for s in self._streams for o in s.suspect]
+        found: list[tuple[int, int, str, str, Decoder, bytes]] = []
         for index, s in enumerate(self._streams):
             for channel_id, log_time, raw in s.messages:
                 topic, schema_id = s.channels[channel_id]
@@ -378,7 +464,7 @@ class BagReader:
                 continue
             report.delivered += 1
             yield BagMessage(topic, name, log_time, msg)
-        self._count_missing(wanted | {t for t, n in self.counts.items() if n and not topics}, read)
+        self._count_missing(wanted | ({t for t, n in self.counts.items() if n} if listed_too else set()), read)
 
     def _count_missing(self, topics: set[str], read: Mapping[str, int]) -> None:
         """What ``metadata.yaml`` lists on ``topics`` beyond what the files held (``read``: messages found)."""
