@@ -113,6 +113,9 @@ def test_a_type_unknown_here_is_decoded_from_the_bags_own_definition(tmp_path: P
     out = run("bag", "info", str(bag))
     assert out.returncode == 0 and f"messages  {TOTAL + 1}" in out.stdout and out.stderr == ""
     assert "decoded with the bag's own definition: lab_msgs/msg/Probe" in out.stdout
+    played = run("bag", "play", str(bag), "--rate", "100")  # every message it can send; the probe is reported
+    assert played.returncode == 1 and f"played {TOTAL} messages" in played.stdout, played.stderr
+    assert "1 message(s) on /lab/probe (lab_msgs/msg/Probe) skipped: not published" in played.stderr
     files = export(bag, tmp_path / "csv")
     assert len(files) == len(BagReader(EXTREME).topics) + 1 and (tmp_path / "csv" / "lab__probe.csv").read_text().count("\n") == 2
 

@@ -74,7 +74,7 @@ class ReadReport:
 
     def losses(self) -> list[str]:
         """One line per loss (empty when :attr:`complete`)."""
-        lines = [f"bag {self.path!r}: {e['count']} message(s) on {topic} ({e['type']}) not read: {e['reason']}"
+        lines = [f"bag {self.path!r}: {e['count']} message(s) on {topic} ({e['type']}) skipped: {e['reason']}"
                  for topic, e in sorted(self.skipped.items())]
         if self.missing:
             per_topic = ", ".join(f"{t} {n}" for t, n in sorted(self.missing.items()))
