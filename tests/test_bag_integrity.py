@@ -12,7 +12,6 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import Optional
 
 import pytest
 from mcap.reader import make_reader
@@ -281,7 +280,7 @@ def test_bad_output_paths_of_the_bag_tools_are_errors_before_any_work(tmp_path: 
     start = time.monotonic()
     out = run("bag", *[a.format(**fill) for a in args])
     assert out.returncode == 2 and "Traceback" not in out.stderr
-    assert f"moose: error: " in out.stderr and message.format(**fill) in out.stderr
+    assert "moose: error: " in out.stderr and message.format(**fill) in out.stderr
     assert time.monotonic() - start < 30  # refused before the re-planning (tens of seconds) ran
 
 

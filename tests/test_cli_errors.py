@@ -6,7 +6,6 @@ child process.
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
 import sys
