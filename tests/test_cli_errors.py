@@ -141,8 +141,10 @@ def test_simulate_prints_its_verdict_and_exits_with_it(tmp_path: Path) -> None:
 
 
 def test_ctrl_c_ends_simulate_with_130(tmp_path: Path) -> None:
+    # as from a terminal: SIGINT at its default (a parent started in the background may pass it on ignored)
     proc = subprocess.Popen(MOOSE + ["simulate", "--duration", "120", "--no-bag", "--json", str(tmp_path / "s.json")],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         time.sleep(1.5)  # while starting or running (121 simulated seconds take several seconds)
         proc.send_signal(signal.SIGINT)
