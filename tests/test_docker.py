@@ -45,6 +45,18 @@ def test_compose_services_launch_existing_groups_and_executables() -> None:
     assert services["bridge"]["profiles"] == ["car"] and "with_simulator:=false" in services["bridge"]["command"]
 
 
+def test_containers_keep_dds_on_the_host_unless_the_user_opts_in() -> None:
+    """Host networking shares the network, not the graph: discovery defaults to LOCALHOST in the image and in
+    every service, and the opt-ins (range, static peers, CYCLONEDDS_URI) pass through from the caller."""
+    text = (ROOT / "docker" / "Dockerfile").read_text()
+    assert re.search(r"^\s+ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST\s*$", text, re.M)
+    compose = yaml.safe_load((ROOT / "docker" / "compose.yaml").read_text())
+    for name, service in compose["services"].items():
+        env = service["environment"]
+        assert env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}", name
+        assert env["ROS_STATIC_PEERS"] == "${ROS_STATIC_PEERS:-}" and env["CYCLONEDDS_URI"] == "${CYCLONEDDS_URI:-}"
+
+
 def test_msg_package_lists_every_message_file() -> None:
     cmake = (WORKSPACE / "moose_msgs" / "CMakeLists.txt").read_text()
     listed = set(re.findall(r'"msg/(\w+)\.msg"', cmake))

@@ -42,7 +42,7 @@ def test_simulate_records_a_bag_by_default_through_the_plugin(tmp_path: Path, mo
     from moose_ros.bag import bag_info
 
     monkeypatch.chdir(tmp_path)
-    assert main(["simulate", "--scenario", "paper_v5_tau3", "--duration", "0.5"]) == 0
+    assert main(["simulate", "--scenario", "paper_v5_tau3", "--duration", "0.5"]) == 1  # stopped_short: too short
     (bag,) = (tmp_path / "runs").glob("*/bag")
     assert f"bag             {bag.relative_to(tmp_path)}" in capsys.readouterr().out
     info = bag_info(bag)

@@ -76,4 +76,6 @@ def test_the_command_refuses_bad_paths_before_running(tmp_path: Path, capsys: py
     assert main(["reproduce", "--write", str(tmp_path / "missing.md")]) == 2
     assert "--write" in capsys.readouterr().err
     assert main(["reproduce", "--json", str(tmp_path / "no" / "such" / "out.json")]) == 2
-    assert main(["reproduce", "--seed", "-1"]) == 2
+    with pytest.raises(SystemExit) as exited:  # argparse's own error: "moose reproduce: error: argument --seed: …"
+        main(["reproduce", "--seed", "-1"])
+    assert exited.value.code == 2 and "--seed: '-1' must be a non-negative integer" in capsys.readouterr().err

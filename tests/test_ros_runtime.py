@@ -346,9 +346,11 @@ def test_rclpy_backend_when_ros2_is_installed() -> None:
     """Runs in the ROS 2 image only (rclpy is not installable here)."""
     pytest.importorskip("rclpy")
     os.environ.pop("MOOSE_RUNTIME", None)
+    saved = os.environ.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)
     try:
         node = create_node("rclpy_check", overrides={"use_sim_time": True, "vehicle.mu": 0.4})
         assert type(node).__name__ == "RclpyNode"
+        assert os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"  # ROS 2's setting, made before rclpy.init
         assert node.use_sim_time is True and node.param("vehicle.mu") == 0.4 and node.now() == 0.0
         msg = node.make(WHEELS, omega_rl=1.0)
         assert msg.omega_rl == 1.0
@@ -358,3 +360,6 @@ def test_rclpy_backend_when_ros2_is_installed() -> None:
         node.shutdown()
     finally:
         os.environ["MOOSE_RUNTIME"] = "dds"
+        os.environ.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)
+        if saved is not None:
+            os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = saved

@@ -213,8 +213,8 @@ def _coerce(name: str, value: Any, hint: Any) -> Any:
 def build(cls: type[T], mapping: Mapping[str, Any] | None, where: str) -> T:
     """Instantiate dataclass ``cls`` from ``mapping``, strictly.
 
-    Missing keys take the dataclass default; unknown keys and ill-typed values
-    raise :class:`ParamError` naming ``where.key`` and the value.  Range checks
+    Missing keys take the dataclass default (a missing key without one is a :class:`ParamError` naming it);
+    unknown keys and ill-typed values raise :class:`ParamError` naming ``where.key`` and the value.  Range checks
     live in each dataclass's ``__post_init__``; their errors are re-raised with
     the ``where`` prefix.
     """
@@ -228,6 +228,11 @@ def build(cls: type[T], mapping: Mapping[str, Any] | None, where: str) -> T:
         raise ParamError(
             f"{where}.{unknown[0]} = {mapping[unknown[0]]!r} is unknown; known fields: {sorted(names)}"
         )
+    required = [f.name for f in dataclasses.fields(cls) if f.init and f.default is dataclasses.MISSING
+                and f.default_factory is dataclasses.MISSING]
+    absent = [name for name in required if name not in mapping]
+    if absent:
+        raise ParamError(f"{where}.{absent[0]} is missing: a required field (required: {', '.join(required)})")
     kwargs = {key: _coerce(f"{where}.{key}", value, hints[key]) for key, value in mapping.items()}
     try:
         return cls(**kwargs)

@@ -156,6 +156,21 @@ class Reference:
 
 
 @dataclasses.dataclass(frozen=True)
+class ActuatorCommand:
+    """Output of the motion controller to the vehicle's actuators (the EPS and the rear in-wheel motors)."""
+
+    t: float
+    steering_angle: float
+    """Steering reference δ* for the EPS (rad)."""
+    steering_rate: float
+    """EPS motor rate command (rad/s)."""
+    torque_rl: float
+    """Rear-left motor torque (N m)."""
+    torque_rr: float
+    """Rear-right motor torque (N m)."""
+
+
+@dataclasses.dataclass(frozen=True)
 class ImuSample:
     """Body-frame IMU measurement (accelerometer specific force and gyro)."""
 

@@ -3,17 +3,20 @@
 Built in: ``simulate`` (one moose test in lockstep, :mod:`.simulate`), ``reproduce`` (the
 paper's cases and claims, :mod:`.reproduce`) and ``can`` (vehicle-bus tools, :mod:`.can`).  Other packages add commands through entry points (:mod:`.plugins`); the
 node graph's ``node``, ``launch`` and ``bag`` come with moose_ros.  Bad input ends with
-``moose: error: …`` naming the field and the value, and a non-zero exit status.
+``moose: error: …`` naming the field and the value, and exit status 2; Ctrl-C with 130
+(:mod:`moose.cli.common` lists every exit status).
 """
 from __future__ import annotations
 
 import argparse
+import os
+import signal
 import sys
 from typing import Callable, Sequence
 
 from ..params import ParamError
 from . import can, reproduce, simulate
-from .common import DEFAULT_SCENARIO
+from .common import DEFAULT_SCENARIO, EXIT_BAD_INPUT, EXIT_INTERRUPTED
 from .plugins import add_plugin_commands
 
 __all__ = ["DEFAULT_SCENARIO", "build_parser", "main"]
@@ -32,13 +35,18 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    handler: Callable[[argparse.Namespace], int] = args.func
     try:
-        return handler(args)
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        handler: Callable[[argparse.Namespace], int] = args.func
+        status = handler(args)
+        sys.stdout.flush()  # here, so a closed pipe is handled below and not at exit
+        return status
     except ParamError as exc:
         print(f"moose: error: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     except KeyboardInterrupt:
-        return 130
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:  # the reader of our output went away (`moose bag info … | head`): not an error of ours
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 128 + signal.SIGPIPE

@@ -1,9 +1,11 @@
-"""Arguments and helpers that several commands share (this package's and plugins')."""
+"""Arguments and helpers that several commands share (this package's and plugins'): scenario flags, exit statuses,
+output paths checked before a run starts."""
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
-from typing import Any
+from typing import Any, Optional, Sequence
 
 from ..params import ParamError
 
@@ -11,15 +13,106 @@ DEFAULT_SCENARIO = "paper_v7_tau1.4"
 """The paper's extreme case (7 m/s, τ = 1.4 s, ν ≈ 0.95): the main job."""
 
 
+EXIT_CLEAR = 0
+"""The run was ``clear`` (and, for other commands, everything worked)."""
+EXIT_FAILED = 1
+"""The run failed: ``collision``, ``left_field``, ``lost_control`` or ``stopped_short``.  Bag tools: the command
+ran, but some data could not be read (each loss is reported on stderr)."""
+EXIT_BAD_INPUT = 2
+"""Bad input (``moose: error: …``): nothing was run."""
+EXIT_INCOMPLETE = 3
+"""The run is ``incomplete``: its data do not cover it (cut short, a stalled simulator)."""
+EXIT_INTERRUPTED = 130
+"""Ctrl-C (128 + SIGINT)."""
+
+OUTCOME_EXIT: dict[str, int] = {"clear": EXIT_CLEAR, "collision": EXIT_FAILED, "left_field": EXIT_FAILED,
+                                "lost_control": EXIT_FAILED, "stopped_short": EXIT_FAILED,
+                                "incomplete": EXIT_INCOMPLETE}
+"""The exit status of each outcome of :data:`moose.verdict.OUTCOMES` (``moose simulate``, ``moose launch``)."""
+
+
+def outcome_exit_status(outcome: str) -> int:
+    """The exit status of a run with ``outcome`` (:data:`OUTCOME_EXIT`)."""
+    return OUTCOME_EXIT[outcome]
+
+
 def positive_float(text: str) -> float:
-    """argparse type: a positive number."""
+    """argparse type: a finite positive number."""
     try:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not value > 0.0:
-        raise argparse.ArgumentTypeError(f"{text!r} must be positive")
+    if not (value > 0.0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"{text!r} must be a finite positive number")
     return value
+
+
+def non_negative_int(text: str) -> int:
+    """argparse type: an integer >= 0 (a seed)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} must be a non-negative integer")
+    return value
+
+
+def check_output_file(flag: str, path: Optional[str], suffixes: Optional[Sequence[str]] = None) -> Optional[Path]:
+    """``path`` as the output file of ``flag``, checked before any work starts (so nothing is lost at the end of a
+    run): not empty, not a directory, a known suffix (when ``suffixes`` are given), and actually writable — its
+    folder is created and the file itself created and removed again (an existing file is opened for appending,
+    which leaves it unchanged).  ``None`` stays ``None``; a problem is a :class:`ParamError` naming the flag."""
+    if path is None:
+        return None
+    if not path.strip():
+        raise ParamError(f"{flag} {path!r} is invalid: expected a file path")
+    target = Path(path)
+    if suffixes is not None and target.suffix.lower().lstrip(".") not in suffixes:
+        raise ParamError(f"{flag} {path!r} is invalid: expected a file ending in one of "
+                         f"{', '.join('.' + s for s in suffixes)}")
+    try:
+        if target.is_dir():
+            raise ParamError(f"{flag} {path!r} is invalid: it is a directory, expected a file")
+        if target.exists():
+            if not target.is_file():
+                raise ParamError(f"{flag} {path!r} is invalid: not a regular file")
+            with open(target, "ab"):
+                pass
+        else:
+            target.parent.mkdir(parents=True, exist_ok=True)
+            with open(target, "xb"):
+                pass
+            target.unlink()
+    except OSError as exc:
+        raise ParamError(f"{flag} {path!r} cannot be written: {exc.strerror or exc}") from None
+    return target
+
+
+def check_output_dir(flag: str, path: Optional[str | Path]) -> Optional[Path]:
+    """``path`` as a new output directory of ``flag`` (a bag), checked before any work starts: it must not exist,
+    and it can be created (it is created and removed again, its parents are kept).  ``None`` stays ``None``."""
+    if path is None:
+        return None
+    if not str(path).strip():
+        raise ParamError(f"{flag} {str(path)!r} is invalid: expected a directory path")
+    target = Path(path)
+    try:
+        if target.exists() or target.is_symlink():
+            raise ParamError(f"{flag} {str(path)!r} exists already: choose another output directory")
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.mkdir()
+        target.rmdir()
+    except OSError as exc:
+        raise ParamError(f"{flag} {str(path)!r} cannot be created: {exc.strerror or exc}") from None
+    return target
+
+
+def plot_suffixes() -> list[str]:
+    """The file types the figure can be written as (matplotlib's)."""
+    from matplotlib.figure import Figure
+
+    return sorted(Figure().canvas.get_supported_filetypes())
 
 
 def add_scenario_arguments(parser: argparse.ArgumentParser) -> None:
@@ -36,7 +129,7 @@ def add_scenario_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--mu", type=positive_float, help="friction coefficient of the road (the plant's)")
     group.add_argument("--mu-estimate", type=positive_float,
                        help="friction the stack assumes, when it differs from the road's (a robustness experiment)")
-    group.add_argument("--seed", type=int, default=0, help="seed of the sensor noise")
+    group.add_argument("--seed", type=non_negative_int, default=0, help="seed of the sensor noise (an integer >= 0)")
 
 
 def scenario_from_args(args: Any) -> Any:

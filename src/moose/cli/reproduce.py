@@ -12,12 +12,13 @@ from pathlib import Path
 from typing import Any
 
 from ..params import ParamError
+from .common import non_negative_int
 
 
 def add_subparser(subparsers: Any) -> None:
     parser = subparsers.add_parser("reproduce", help="re-run the paper's cases and judge its claims")
     parser.add_argument("--config", help="ROS 2 parameter file (default config/moose.yaml)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the sensor noise (a non-negative integer)")
+    parser.add_argument("--seed", type=non_negative_int, default=0, help="seed of the sensor noise (an integer >= 0)")
     parser.add_argument("--write", metavar="DESIGN_MD",
                         help="regenerate the calibration, results and claims blocks of this file (docs/design.md)")
     parser.add_argument("--json", help="write every run's summary as JSON to this path")
@@ -28,8 +29,6 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     from ..config import load_config
     from ..reproduce import claims, render_calibration, render_claims, render_results, run_all, update_document
 
-    if args.seed < 0:
-        raise ParamError(f"--seed = {args.seed!r} is invalid: expected a non-negative integer")
     for option in ("write", "json"):
         path = getattr(args, option)
         if path is not None and not Path(path).parent.is_dir():

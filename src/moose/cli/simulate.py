@@ -1,8 +1,11 @@
 """``moose simulate``: one moose test in lockstep (a scenario file or an ad-hoc test).
 
-Prints the summary and optionally writes JSON and the figure.  The run is recorded as a ROS 2 bag
-by the recorder plugin (entry point group ``moose.recorders``, provided by moose_ros) unless
-``--no-bag``; without a recorder installed the command says so and records nothing.
+Prints the summary (the verdict first) and optionally writes JSON and the figure.  The run is recorded as a
+ROS 2 bag by the recorder plugin (entry point group ``moose.recorders``, provided by moose_ros) unless
+``--no-bag``; without a recorder installed the command says so and records nothing.  Every output path is
+checked before the run starts.  Exit status: 0 ``clear``, 1 a failure outcome (``collision``,
+``left_field``, ``lost_control``, ``stopped_short``), 3 ``incomplete``, 2 bad input, 130 Ctrl-C
+(:data:`moose.cli.common.OUTCOME_EXIT`).
 """
 from __future__ import annotations
 
@@ -13,7 +16,10 @@ from pathlib import Path
 from typing import Any, Callable, Optional
 
 from ..params import ParamError
-from .common import add_scenario_arguments, configure, run_folder, scenario_from_args
+from .common import (
+    add_scenario_arguments, check_output_dir, check_output_file, configure, outcome_exit_status, plot_suffixes,
+    run_folder, scenario_from_args,
+)
 from .plugins import recorder
 
 
@@ -32,14 +38,14 @@ def format_summary(summary: dict[str, Any]) -> str:
     solve = summary["mpc_solve_ms"]
     lines = [
         f"scenario        {summary['scenario']}  (planner {summary['planner']}, seed {summary['seed']})",
+        f"outcome         {summary['outcome'].upper()}: {summary['reason']}",
         f"threat          tau = {_fmt(summary['tau_s'])} s, nu = {_fmt(summary['nu'])}"
         f" (paper {_fmt(summary['paper_nu'])}), w = {_fmt(summary['w_m'])} m",
-        f"outcome         {'COLLISION' if summary['collided'] else 'collision-free'}, "
-        f"{'LEFT THE FIELD' if summary['left_field'] else 'inside the field'}",
-        f"min clearance   {summary['min_clearance_m']:.2f} m",
-        f"max |delta|     {summary['max_abs_steer_rad']:.3f} rad",
-        f"max |y - y0|    {summary['max_lateral_offset_m']:.2f} m (final {summary['final_lateral_offset_m']:+.2f} m)",
-        f"speed range     {summary['min_speed_mps']:.2f} .. {summary['max_speed_mps']:.2f} m/s",
+        f"min clearance   {_fmt(summary['min_clearance_m'], '.2f')} m",
+        f"max |delta|     {_fmt(summary['max_abs_steer_rad'], '.3f')} rad",
+        f"max |y - y0|    {_fmt(summary['max_lateral_offset_m'], '.2f')} m"
+        f" (final {_fmt(summary['final_lateral_offset_m'], '+.2f')} m)",
+        f"speed range     {_fmt(summary['min_speed_mps'], '.2f')} .. {_fmt(summary['max_speed_mps'], '.2f')} m/s",
         f"MPC solves      {solve['count']}  median {_fmt(solve['median'])} ms, p95 {_fmt(solve['p95'])} ms,"
         f" max {_fmt(solve['max'])} ms  statuses {summary['mpc_status_counts']}",
         f"mean w_MPC      {_fmt(summary['mean_weight_mpc'])} (over steps with a threat)",
@@ -47,8 +53,8 @@ def format_summary(summary: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _fmt(value: Any) -> str:
-    return "n/a" if value is None else f"{value:.3g}"
+def _fmt(value: Any, spec: str = ".3g") -> str:
+    return "n/a" if value is None else format(value, spec)
 
 
 def bag_recorder(args: argparse.Namespace) -> Optional[Callable[[Any, Path], Any]]:
@@ -74,19 +80,21 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     record = bag_recorder(args)
     scenario = scenario_from_args(args)
     config = configure(load_config(args.config), args)
+    # every output is checked before the run, so none of them is lost at its end
+    json_path = check_output_file("--json", args.json)
+    plot_path = check_output_file("--plot", args.plot, plot_suffixes()) if args.plot is not None else None
+    bag_path = check_output_dir("--bag", args.bag) if record is not None else None
     result = simulate(config, scenario, planner=args.planner, seed=args.seed)
     summary = summarize(result)
     print(format_summary(summary))
-    if args.json:
-        path = Path(args.json)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
-        print(f"summary         {path}")
-    if args.plot:
-        print(f"figure          {plot_result([result], args.plot)}")
+    if json_path is not None:
+        json_path.write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+        print(f"summary         {json_path}")
+    if plot_path is not None:
+        print(f"figure          {plot_result([result], plot_path)}")
     if record is not None:
-        path = Path(args.bag) if args.bag else run_folder(scenario.name, result.planner) / "bag"
+        path = bag_path if bag_path is not None else run_folder(scenario.name, result.planner) / "bag"
         record(result, path)
         print(f"bag             {path}")
-    return 0
+    return outcome_exit_status(summary["outcome"])
 

@@ -2,6 +2,15 @@
 
 Messages are filled attribute by attribute, so the same code serves the rclpy classes
 and the DDS dataclasses.
+
+Received messages are validated here, and only here: every ``*_from_msg`` raises
+:class:`InvalidMessage` (naming the field and the value) for a message the graph must not act on —
+a number that is not finite, a geometry that is not a box (``x_min < x_max``, ``y_min < y_max``), an
+enumeration out of range, arrays of unequal length, a stamp that is negative, malformed or more than
+:data:`~moose_ros.graph.STAMP_TOLERANCE` ahead of the receiver's clock.  :data:`RECORDS` names the
+converter of every topic a node subscribes to; nodes subscribe through
+:meth:`moose_ros.nodes.base.GraphNode.subscribe`, which drops, counts and reports an invalid message
+and never lets it raise out of a callback.
 """
 from __future__ import annotations
 
@@ -11,15 +20,69 @@ from typing import Any, Callable, Optional
 import numpy as np
 
 from moose.signals import (
-    Blend, EpsSample, GpsSample, ImuSample, Obstacle, PlanResult, Reference, StateEstimate, Threat, WheelSpeedSample,
+    ActuatorCommand, Blend, EpsSample, GpsSample, ImuSample, Obstacle, PlanResult, Reference, StateEstimate, Threat,
+    WheelSpeedSample,
 )
 
 from .graph import (
-    FRAME_BASE, FRAME_GPS, FRAME_IMU, FRAME_ODOM, FRAME_TRUTH, GPS, IMU, SENSOR_MOUNTS, STEERING, WHEEL_SPEEDS, Topic,
+    ACTUATOR_COMMAND, BLEND, DIAGNOSTICS, FRAME_BASE, FRAME_GPS, FRAME_IMU, FRAME_ODOM, FRAME_TRUTH, GPS, IMU,
+    OBSTACLES, PLAN_MPC, PLAN_MSF, REFERENCE, SENSOR_MOUNTS, STAMP_TOLERANCE, STATE, STEERING, THREAT, WHEEL_SPEEDS,
+    Topic,
 )
 
 STATUS_CODES = {"converged": 0, "capped": 1, "failed": 2, "over_budget": 3, "ok": 4, "idle": 5}
 STATUS_NAMES = {code: name for name, code in STATUS_CODES.items()}
+
+
+class InvalidMessage(ValueError):
+    """A received message the graph must not act on; ``str()`` names the message type, the field and the value."""
+
+
+def _finite(kind: str, **fields: Any) -> None:
+    """Raise :class:`InvalidMessage` unless every field is a finite number."""
+    for name, value in fields.items():
+        try:
+            ok = math.isfinite(value)
+        except TypeError:
+            ok = False
+        if not ok:
+            raise InvalidMessage(f"{kind}.{name} = {value!r} is invalid: expected a finite number")
+
+
+def _finite_array(kind: str, name: str, values: Any) -> np.ndarray:
+    try:
+        array = np.asarray(values, dtype=float)
+    except (TypeError, ValueError):
+        raise InvalidMessage(f"{kind}.{name} is invalid: expected numbers") from None
+    bad = np.flatnonzero(~np.isfinite(array))
+    if bad.size:
+        raise InvalidMessage(f"{kind}.{name}[{bad[0]}] = {array[bad[0]]!r} is invalid: expected a finite number")
+    return array
+
+
+def _same_length(kind: str, first: tuple[str, np.ndarray], second: tuple[str, np.ndarray], minimum: int = 1) -> None:
+    """Raise :class:`InvalidMessage` unless both arrays have one length of at least ``minimum``."""
+    (name_a, a), (name_b, b) = first, second
+    if a.size < minimum:
+        raise InvalidMessage(f"{kind}.{name_a} (length {a.size}) is invalid: expected at least {minimum} element(s)")
+    if a.shape != b.shape:
+        raise InvalidMessage(f"{kind}.{name_b} (length {b.size}) is invalid: expected the length of {name_a} ({a.size})")
+
+
+def checked_time(msg: Any, now: Optional[float] = None) -> float:
+    """The header stamp of a received message (s), checked: ``0 <= nanosec < 1e9``, not negative, and — when the
+    receiver's clock ``now`` is known — at most :data:`~moose_ros.graph.STAMP_TOLERANCE` ahead of it."""
+    kind = type(msg).__name__
+    sec, nanosec = msg.header.stamp.sec, msg.header.stamp.nanosec
+    if not 0 <= nanosec < 1_000_000_000:
+        raise InvalidMessage(f"{kind}.header.stamp.nanosec = {nanosec!r} is invalid: expected 0 .. 999999999")
+    t = sec + 1e-9 * nanosec
+    if sec < 0:
+        raise InvalidMessage(f"{kind}.header.stamp = {t!r} s is invalid: expected a time >= 0")
+    if now is not None and t > now + STAMP_TOLERANCE:
+        raise InvalidMessage(f"{kind}.header.stamp = {t:.3f} s is invalid: {t - now:.3f} s ahead of this node's "
+                             f"clock ({now:.3f} s; at most {STAMP_TOLERANCE:g} s allowed)")
+    return t
 
 
 def stamp(msg: Any, t: float, frame: str = FRAME_ODOM) -> None:
@@ -42,16 +105,31 @@ def estimate_to_msg(node: Any, e: StateEstimate) -> Any:
     return msg
 
 
-def estimate_from_msg(msg: Any) -> StateEstimate:
-    return StateEstimate(time_of(msg), msg.x, msg.y, msg.theta, msg.vx, msg.vy, msg.gamma, msg.delta)
+def estimate_from_msg(msg: Any, now: Optional[float] = None) -> StateEstimate:
+    t = checked_time(msg, now)
+    _finite("StateEstimate", x=msg.x, y=msg.y, theta=msg.theta, vx=msg.vx, vy=msg.vy, gamma=msg.gamma, beta=msg.beta,
+            delta=msg.delta)
+    return StateEstimate(t, msg.x, msg.y, msg.theta, msg.vx, msg.vy, msg.gamma, msg.delta)
 
 
 def _fill_obstacle(msg: Any, o: Obstacle) -> None:
     msg.x_min, msg.x_max, msg.y_min, msg.y_max = o.x_min, o.x_max, o.y_min, o.y_max
 
 
-def obstacle_from_msg(msg: Any) -> Obstacle:
+def obstacle_from_msg(msg: Any, kind: str = "Obstacle") -> Obstacle:
+    """A danger zone: finite corners of a box with ``x_min < x_max`` and ``y_min < y_max``."""
+    _finite(kind, x_min=msg.x_min, x_max=msg.x_max, y_min=msg.y_min, y_max=msg.y_max)
+    for low, high in (("x_min", "x_max"), ("y_min", "y_max")):
+        if not getattr(msg, low) < getattr(msg, high):
+            raise InvalidMessage(f"{kind}.{low} = {getattr(msg, low)!r} is invalid: expected below {kind}.{high} = "
+                                 f"{getattr(msg, high)!r}")
     return Obstacle(msg.x_min, msg.x_max, msg.y_min, msg.y_max)
+
+
+def obstacles_from_msg(msg: Any, now: Optional[float] = None) -> list[Obstacle]:
+    """The danger zones of an ObstacleArray; one invalid zone makes the whole message invalid."""
+    checked_time(msg, now)
+    return [obstacle_from_msg(o, f"ObstacleArray.obstacles[{i}]") for i, o in enumerate(msg.obstacles)]
 
 
 def obstacles_to_msg(node: Any, t: float, obstacles: list[Obstacle]) -> Any:
@@ -78,10 +156,16 @@ def threat_to_msg(node: Any, t: float, threat: Optional[Threat]) -> Any:
     return msg
 
 
-def threat_from_msg(msg: Any) -> Optional[Threat]:
+def threat_from_msg(msg: Any, now: Optional[float] = None) -> Optional[Threat]:
+    """The threat, or None when none is active (τ and ν of 1e9 stand for "not closing in" / "no room", as sent)."""
+    t = checked_time(msg, now)
     if not msg.active:
         return None
-    return Threat(time_of(msg), obstacle_from_msg(msg.obstacle), msg.tau, msg.w, msg.nu, int(msg.side), msg.y_path)
+    obstacle = obstacle_from_msg(msg.obstacle, "Threat.obstacle")
+    _finite("Threat", tau=msg.tau, w=msg.w, nu=msg.nu, y_path=msg.y_path)
+    if msg.side not in (-1, 1):
+        raise InvalidMessage(f"Threat.side = {msg.side!r} is invalid: expected -1 (right) or +1 (left)")
+    return Threat(t, obstacle, msg.tau, msg.w, msg.nu, int(msg.side), msg.y_path)
 
 
 def plan_to_msg(node: Any, t: float, planner: str, plan: PlanResult, with_threat: bool) -> Any:
@@ -98,11 +182,31 @@ def plan_to_msg(node: Any, t: float, planner: str, plan: PlanResult, with_threat
 
 
 def plan_from_msg(msg: Any) -> PlanResult:
-    accel = np.column_stack([np.asarray(msg.accel_x, float), np.asarray(msg.accel_y, float)])
-    predicted = np.column_stack([np.asarray(getattr(msg, f), float)
-                                 for f in ("predicted_x", "predicted_y", "predicted_vx", "predicted_vy")])
+    """A planner's answer: a known status, finite accelerations of equal length (at least one step), a finite
+    predicted path (positions and velocities) of equal lengths, a finite non-negative solve time, a finite
+    cost (1e300 and above: none)."""
+    if msg.status not in STATUS_NAMES:
+        raise InvalidMessage(f"PlannerOutput.status = {msg.status!r} is invalid: expected one of {sorted(STATUS_NAMES)}")
+    ax, ay = _finite_array("PlannerOutput", "accel_x", msg.accel_x), _finite_array("PlannerOutput", "accel_y", msg.accel_y)
+    _same_length("PlannerOutput", ("accel_x", ax), ("accel_y", ay))
+    columns = [(f, _finite_array("PlannerOutput", f, getattr(msg, f)))
+               for f in ("predicted_x", "predicted_y", "predicted_vx", "predicted_vy")]
+    for column in columns[1:]:
+        _same_length("PlannerOutput", columns[0], column, minimum=0)
+    _finite("PlannerOutput", solve_time=msg.solve_time)
+    if msg.solve_time < 0:
+        raise InvalidMessage(f"PlannerOutput.solve_time = {msg.solve_time!r} is invalid: expected a time >= 0")
+    if math.isnan(msg.cost):
+        raise InvalidMessage(f"PlannerOutput.cost = {msg.cost!r} is invalid: expected a number (1e300: none)")
+    predicted = np.column_stack([values for _, values in columns]) if columns[0][1].size else np.zeros((0, 4))
     cost = msg.cost if msg.cost < 1e299 else math.inf
-    return PlanResult(accel, STATUS_NAMES[int(msg.status)], int(msg.iterations), msg.solve_time, cost, predicted)  # type: ignore[arg-type]
+    return PlanResult(np.column_stack([ax, ay]), STATUS_NAMES[int(msg.status)], int(msg.iterations),  # type: ignore[arg-type]
+                      msg.solve_time, cost, predicted)
+
+
+def stamped_plan_from_msg(msg: Any, now: Optional[float] = None) -> tuple[float, bool, PlanResult]:
+    """(planning instant, planned against a threat, plan) of a PlannerOutput."""
+    return checked_time(msg, now), bool(msg.with_threat), plan_from_msg(msg)
 
 
 def blend_to_msg(node: Any, t: float, blend: Blend, reference: Reference, delta_mpc: float = math.nan) -> Any:
@@ -115,8 +219,15 @@ def blend_to_msg(node: Any, t: float, blend: Blend, reference: Reference, delta_
     return msg
 
 
-def blend_accel(msg: Any) -> np.ndarray:
-    return np.column_stack([np.asarray(msg.accel_x, float), np.asarray(msg.accel_y, float)])
+def blend_from_msg(msg: Any, now: Optional[float] = None) -> Blend:
+    """The blend: a weight in [0, 1] and finite accelerations of equal length (at least one step)."""
+    checked_time(msg, now)
+    _finite("Blend", weight_mpc=msg.weight_mpc, delta_ref=msg.delta_ref, vx_ref=msg.vx_ref)
+    if not 0.0 <= msg.weight_mpc <= 1.0:
+        raise InvalidMessage(f"Blend.weight_mpc = {msg.weight_mpc!r} is invalid: expected a weight in [0, 1]")
+    ax, ay = _finite_array("Blend", "accel_x", msg.accel_x), _finite_array("Blend", "accel_y", msg.accel_y)
+    _same_length("Blend", ("accel_x", ax), ("accel_y", ay))
+    return Blend(float(msg.weight_mpc), np.column_stack([ax, ay]))
 
 
 def reference_to_msg(node: Any, t: float, reference: Reference) -> Any:
@@ -126,7 +237,9 @@ def reference_to_msg(node: Any, t: float, reference: Reference) -> Any:
     return msg
 
 
-def reference_from_msg(msg: Any) -> Reference:
+def reference_from_msg(msg: Any, now: Optional[float] = None) -> Reference:
+    checked_time(msg, now)
+    _finite("Reference", delta_ref=msg.delta_ref, vx_ref=msg.vx_ref)
     return Reference(delta=msg.delta_ref, vx=msg.vx_ref)
 
 
@@ -139,8 +252,11 @@ def imu_to_msg(node: Any, s: ImuSample) -> Any:
     return msg
 
 
-def imu_from_msg(msg: Any) -> ImuSample:
-    return ImuSample(time_of(msg), msg.linear_acceleration.x, msg.linear_acceleration.y, msg.angular_velocity.z)
+def imu_from_msg(msg: Any, now: Optional[float] = None) -> ImuSample:
+    t = checked_time(msg, now)
+    a, w = msg.linear_acceleration, msg.angular_velocity
+    _finite("Imu", **{"linear_acceleration.x": a.x, "linear_acceleration.y": a.y, "angular_velocity.z": w.z})
+    return ImuSample(t, a.x, a.y, w.z)
 
 
 def gps_to_msg(node: Any, s: GpsSample) -> Any:
@@ -153,10 +269,14 @@ def gps_to_msg(node: Any, s: GpsSample) -> Any:
     return msg
 
 
-def gps_from_msg(msg: Any, t_received: float) -> GpsSample:
-    t_measured = time_of(msg)
-    return GpsSample(max(t_received, t_measured), t_measured, msg.pose.pose.position.x, msg.pose.pose.position.y,
-                     msg.twist.twist.linear.x, msg.twist.twist.linear.y)
+def gps_from_msg(msg: Any, t_received: Optional[float] = None) -> GpsSample:
+    """A GPS fix received at ``t_received`` (the receiver's clock; None: unknown, taken as the measurement time)."""
+    t_measured = checked_time(msg, t_received)
+    p, v = msg.pose.pose.position, msg.twist.twist.linear
+    _finite("Odometry", **{"pose.pose.position.x": p.x, "pose.pose.position.y": p.y, "twist.twist.linear.x": v.x,
+                           "twist.twist.linear.y": v.y})
+    received = t_measured if t_received is None else max(t_received, t_measured)
+    return GpsSample(received, t_measured, p.x, p.y, v.x, v.y)
 
 
 def wheels_to_msg(node: Any, s: WheelSpeedSample) -> Any:
@@ -166,8 +286,10 @@ def wheels_to_msg(node: Any, s: WheelSpeedSample) -> Any:
     return msg
 
 
-def wheels_from_msg(msg: Any) -> WheelSpeedSample:
-    return WheelSpeedSample(time_of(msg), msg.omega_rl, msg.omega_rr)
+def wheels_from_msg(msg: Any, now: Optional[float] = None) -> WheelSpeedSample:
+    t = checked_time(msg, now)
+    _finite("WheelSpeeds", omega_rl=msg.omega_rl, omega_rr=msg.omega_rr)
+    return WheelSpeedSample(t, msg.omega_rl, msg.omega_rr)
 
 
 def steering_to_msg(node: Any, s: EpsSample) -> Any:
@@ -177,8 +299,10 @@ def steering_to_msg(node: Any, s: EpsSample) -> Any:
     return msg
 
 
-def steering_from_msg(msg: Any) -> EpsSample:
-    return EpsSample(time_of(msg), msg.delta)
+def steering_from_msg(msg: Any, now: Optional[float] = None) -> EpsSample:
+    t = checked_time(msg, now)
+    _finite("SteeringReport", delta=msg.delta)
+    return EpsSample(t, msg.delta)
 
 
 def _yaw(quaternion: Any, theta: float) -> None:
@@ -205,6 +329,13 @@ def actuator_to_msg(node: Any, t: float, reference: Reference, u: np.ndarray) ->
     msg.steering_angle, msg.steering_rate = reference.delta, float(u[0])
     msg.torque_rl, msg.torque_rr = float(u[1]), float(u[2])
     return msg
+
+
+def actuator_from_msg(msg: Any, now: Optional[float] = None) -> ActuatorCommand:
+    t = checked_time(msg, now)
+    _finite("ActuatorCommand", steering_angle=msg.steering_angle, steering_rate=msg.steering_rate,
+            torque_rl=msg.torque_rl, torque_rr=msg.torque_rr)
+    return ActuatorCommand(t, msg.steering_angle, msg.steering_rate, msg.torque_rl, msg.torque_rr)
 
 
 def diagnostic_to_msg(node: Any, t: float, name: str, level: int, message: str, values: dict[str, Any]) -> Any:
@@ -319,6 +450,39 @@ def markers_to_msg(node: Any, t: float, threat: Optional[Threat], mpc: Optional[
     msg.markers = [zone, width, _path(node, t, "mpc", mpc.predicted if mpc is not None else None),
                    _path(node, t, "msf", msf.predicted if msf is not None else None), _path(node, t, "blend", blend)]
     return msg
+
+
+def statuses_from_msg(msg: Any, now: Optional[float] = None) -> list[tuple[str, int, str]]:
+    """(name, level, message) of each status of a DiagnosticArray: a non-empty name, a level OK..STALE (0..3)."""
+    checked_time(msg, now)
+    out = []
+    for i, status in enumerate(msg.status):
+        level = status.level[0] if isinstance(status.level, (bytes, bytearray)) else status.level
+        if level not in (0, 1, 2, 3) or not status.name:
+            raise InvalidMessage(f"DiagnosticArray.status[{i}] (name {status.name!r}, level {level!r}) is invalid: "
+                                 "expected a name and a level 0..3")
+        out.append((status.name, int(level), status.message))
+    return out
+
+
+RECORDS: dict[str, Callable[[Any, Optional[float]], Any]] = {
+    IMU.name: imu_from_msg,
+    GPS.name: gps_from_msg,
+    WHEEL_SPEEDS.name: wheels_from_msg,
+    STEERING.name: steering_from_msg,
+    OBSTACLES.name: obstacles_from_msg,
+    STATE.name: estimate_from_msg,
+    THREAT.name: threat_from_msg,
+    PLAN_MPC.name: stamped_plan_from_msg,
+    PLAN_MSF.name: stamped_plan_from_msg,
+    BLEND.name: blend_from_msg,
+    REFERENCE.name: reference_from_msg,
+    ACTUATOR_COMMAND.name: actuator_from_msg,
+    DIAGNOSTICS.name: statuses_from_msg,
+}
+"""The validating converter of every topic a node subscribes to: ``convert(msg, now)`` → the core's record
+(plans: ``(instant, PlanResult)``; the threat: ``None`` when none is active; diagnostics: ``[(name, level,
+message)]``), or :class:`InvalidMessage`.  ``now``: the receiver's clock, ``None`` while it is unknown."""
 
 
 SENSOR_SAMPLES: dict[type, tuple[Topic, Callable[[Any, Any], Any]]] = {

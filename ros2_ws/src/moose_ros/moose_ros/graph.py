@@ -23,6 +23,14 @@ COMMAND_TIMEOUT = 0.05
 The one value of the command guard of the CAN bridge, the vehicle-ECU emulator and the simulator's
 topic input (which stands in for the same ECUs)."""
 
+STAMP_TOLERANCE = 0.5
+"""How far (s) a received message's stamp may lie ahead of the receiver's clock before it is dropped as invalid
+(:func:`moose_ros.convert.checked_time`).  Within one graph every stamp comes from one clock (simulated time, or
+the host's wall clock on the car) and a subscriber's clock lags by at most its queue: a keep-last-10 backlog at
+100 Hz is 0.1 s.  A sample from much further ahead would make the observer refuse every real sample after it as
+out of order, so it is refused instead.  Graphs across hosts need their clocks synchronised far better (PTP,
+chrony)."""
+
 
 @dataclasses.dataclass(frozen=True)
 class Node:

@@ -55,6 +55,8 @@ class Monitor:
     current_threat: Any = None
     diagnostics: dict = dataclasses.field(default_factory=dict)
     finished: bool = False
+    invalid: int = 0
+    """Invalid plans and threats dropped (moose_ros.convert validates them)."""
 
     def attach(self, node: DdsNode) -> None:  # a tool that must not miss a sample (graph.Topic.tool_qos)
         ODOM.tool_subscription(node, self.on_odom)
@@ -70,10 +72,18 @@ class Monitor:
         self.odom.append((cv.time_of(m), p.x, p.y, yaw, v.x, v.y, self.delta))
 
     def on_mpc(self, m: Any) -> None:
-        self.plans.append((cv.time_of(m), cv.plan_from_msg(m), self.current_threat))
+        try:
+            t, _, plan = cv.stamped_plan_from_msg(m)
+            self.plans.append((t, plan, self.current_threat))
+        except cv.InvalidMessage:
+            self.invalid += 1
 
     def on_threat(self, m: Any) -> None:
-        self.current_threat = cv.threat_from_msg(m)
+        try:
+            self.current_threat = cv.threat_from_msg(m)
+        except cv.InvalidMessage:
+            self.invalid += 1
+            return
         if self.current_threat is not None and self.first_threat is None:
             self.first_threat = self.current_threat
 
@@ -254,5 +264,6 @@ def launch(
     summary["node_exits"] = exits
     summary["diagnostics"] = {k: {"level": v[0], "message": v[1]} for k, v in monitor.diagnostics.items()}
     summary["odom_samples"] = len(monitor.odom)
+    summary["invalid_messages"] = monitor.invalid
     return summary
 

@@ -4,8 +4,9 @@ Bags are ROS 2 bag directories (``metadata.yaml`` + ``.mcap``), CDR messages wit
 embedded, so ``ros2 bag info/play``, rosbags and Foxglove open them.  Only public APIs of ``mcap`` and
 ``rosbags`` are used.
 
-Modules: :mod:`.writer` (:class:`BagWriter`: crash-safe writing), :mod:`.reader` (:func:`read_bag`,
-recovery of unfinished files, :func:`bag_info`), :mod:`.record` (:class:`Recorder` of a running graph,
+Modules: :mod:`.writer` (:class:`BagWriter`: crash-safe writing), :mod:`.reader` (:class:`BagReader`,
+:func:`read_bag`: recovery of unfinished files, types from the bag's own definitions, a :class:`ReadReport` of
+everything that could not be read; :func:`bag_info`), :mod:`.record` (:class:`Recorder` of a running graph,
 :func:`record_result` of a lockstep run, :func:`record_simulation`: the recorder plugin of ``moose
 simulate``), :mod:`.params` (the run's parameters kept in the bag), :mod:`.play`, :mod:`.export` (CSV,
 Parquet), :mod:`.replan` (open-loop re-planning and its figure), :mod:`.view` (bird's-eye view).
@@ -13,7 +14,7 @@ Parquet), :mod:`.replan` (open-loop re-planning and its figure), :mod:`.view` (b
 from .errors import BagError
 from .export import export, flatten
 from .play import play
-from .reader import BagMessage, bag_info, read_bag
+from .reader import BagMessage, BagReader, ReadReport, bag_info, read_bag
 from .record import Recorder, record_result, record_simulation
 from .params import RunParameters, read_run_parameters
 from .replan import plot_replan, replan
@@ -21,6 +22,7 @@ from .view import plot_birdseye
 from .writer import BagWriter
 
 __all__ = [
-    "BagError", "BagMessage", "BagWriter", "Recorder", "RunParameters", "bag_info", "export", "flatten", "play",
-    "plot_birdseye", "plot_replan", "read_bag", "read_run_parameters", "record_result", "record_simulation", "replan",
+    "BagError", "BagMessage", "BagReader", "BagWriter", "ReadReport", "Recorder", "RunParameters", "bag_info", "export",
+    "flatten", "play", "plot_birdseye", "plot_replan", "read_bag", "read_run_parameters", "record_result",
+    "record_simulation", "replan",
 ]

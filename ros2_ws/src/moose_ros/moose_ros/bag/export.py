@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any, Optional, Sequence
 
 from .errors import BagError
-from .reader import read_bag
+from .reader import ReadReport, read_bag
 
 
 def flatten(msg: Any, prefix: str = "") -> dict[str, Any]:
@@ -35,15 +35,30 @@ def flatten(msg: Any, prefix: str = "") -> dict[str, Any]:
 
 
 def export(path: str | Path, out_dir: str | Path, topics: Optional[Sequence[str]] = None,
-           fmt: str = "csv") -> list[Path]:
-    """One file per topic (CSV or Parquet): ``timestamp_ns`` and the flattened fields."""
+           fmt: str = "csv", report: Optional[ReadReport] = None) -> list[Path]:
+    """One file per topic (CSV or Parquet): ``timestamp_ns`` and the flattened fields.
+
+    ``topics`` must be topics of the bag; ``out_dir`` is checked (created) before the bag is read.  Pass a
+    :class:`~moose_ros.bag.reader.ReadReport` to learn what could not be read."""
     if fmt not in ("csv", "parquet"):
         raise BagError(f"format = {fmt!r} is invalid: expected 'csv' or 'parquet'")
-    rows: dict[str, list[dict[str, Any]]] = defaultdict(list)
-    for m in read_bag(path, topics):
-        rows[m.topic].append({"timestamp_ns": m.timestamp_ns, **flatten(m.msg)})
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise BagError(f"output {str(out_dir)!r} is not a directory: export writes one file per topic into a folder")
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise BagError(f"output folder {str(out_dir)!r} cannot be created: {exc.strerror or exc}") from None
+    rows: dict[str, list[dict[str, Any]]] = defaultdict(list)
+    for m in read_bag(path, topics, report):
+        rows[m.topic].append({"timestamp_ns": m.timestamp_ns, **flatten(m.msg)})
+    try:
+        return _write(rows, out_dir, fmt)
+    except OSError as exc:
+        raise BagError(f"export into {str(out_dir)!r} failed: {exc.strerror or exc}") from None
+
+
+def _write(rows: dict[str, list[dict[str, Any]]], out_dir: Path, fmt: str) -> list[Path]:
     written = []
     for topic, items in rows.items():
         columns: list[str] = []

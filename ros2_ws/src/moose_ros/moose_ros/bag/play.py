@@ -6,25 +6,43 @@ from pathlib import Path
 from typing import Any, Optional, Sequence
 
 from ..graph import CLOCK, TOPICS
-from ..interfaces import from_rosbags
+from ..interfaces import UnknownMessageType, from_rosbags
 from ..runtime import QOS_DEFAULT
 from .errors import BagError
-from .reader import read_bag
+from .reader import BagReader, ReadReport
 
 
 def play(path: str | Path, node: Any, rate: float = 1.0, topics: Optional[Sequence[str]] = None, loop: bool = False,
-         start: float = 0.0, clock: bool = False, stop: Optional[Any] = None) -> int:
-    """Publish a bag's messages with their original timing (scaled by ``rate``); returns the count sent."""
-    messages = list(read_bag(path, topics))
-    if not messages:
-        raise BagError(f"bag {str(path)!r} has no messages on {list(topics) if topics else 'any topic'}")
+         start: float = 0.0, clock: bool = False, stop: Optional[Any] = None,
+         report: Optional[ReadReport] = None) -> int:
+    """Publish a bag's messages with their original timing (scaled by ``rate``); returns the count sent.
+
+    The whole bag is read before the first message goes out, and checked: ``topics`` must be topics of the bag
+    (a typo never publishes every topic), and a topic of the graph must carry the graph's type.  Messages of
+    types this installation cannot publish are not sent, and are counted in ``report`` with what could not be
+    read (:class:`~moose_ros.bag.reader.ReadReport`)."""
+    report = report if report is not None else ReadReport(str(path))
+    reader = BagReader(path, report)
+    try:
+        reader.check(topics, {name: topic.type for name, topic in TOPICS.items()})
+        messages = list(reader.messages(topics))
+    finally:
+        reader.close()
+    prepared = []  # converted before the first message goes out, so a failure never cuts the playback short
+    for m in messages:
+        try:
+            prepared.append((m, from_rosbags(m.msg, m.type_name)))
+        except (UnknownMessageType, KeyError, AttributeError, TypeError) as exc:
+            report.skip(m.topic, m.type_name, f"not published: this installation cannot send it ({exc})")
+    if not prepared:
+        raise BagError(f"bag {str(path)!r} has no messages on {list(topics) if topics else 'any topic'} that can be played")
     publishers: dict[str, Any] = {}
     clock_pub = CLOCK.publisher(node) if clock else None
-    t0 = messages[0].timestamp_ns + int(start * 1e9)
+    t0 = prepared[0][0].timestamp_ns + int(start * 1e9)
     sent = 0
     while True:
         wall0 = time.monotonic()
-        for m in messages:
+        for m, dds in prepared:
             if m.timestamp_ns < t0:
                 continue
             if stop is not None and stop.is_set():
@@ -42,7 +60,7 @@ def play(path: str | Path, node: Any, rate: float = 1.0, topics: Optional[Sequen
                 c = node.make(CLOCK.type)
                 c.clock.sec, c.clock.nanosec = divmod(m.timestamp_ns, 1_000_000_000)
                 clock_pub(c)
-            publishers[m.topic](from_rosbags(m.msg, m.type_name))
+            publishers[m.topic](dds)
             sent += 1
         if not loop:
             return sent

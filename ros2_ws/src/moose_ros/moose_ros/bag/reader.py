@@ -1,19 +1,32 @@
 """Read a bag: messages in time order, also from the unfinished file of a killed recorder; summary statistics.
 
-A bag with ``metadata.yaml`` is read with rosbags' public :class:`rosbags.rosbag2.Reader`.  Without it
-(a recorder killed before closing the bag), each ``.mcap`` file of the directory is streamed record by
-record with the ``mcap`` library's public :class:`~mcap.stream_reader.StreamReader`: every complete
-record is kept (for chunked files, every complete chunk), so no summary, index or footer is needed.
+Nothing is lost silently.  :class:`BagReader` says, in its :class:`ReadReport`, every message it could not
+deliver and why:
+
+- **Types this installation does not know** are decoded with the definition the bag embeds (``ros2msg``
+  or ``ros2idl``, as rosbags' AnyReader does), and so is a known type that the bag recorded with another
+  definition (its RIHS01 hash differs).  A message that still cannot be decoded (no definition, corrupt
+  CDR) is skipped, counted per topic and reported; reading goes on.
+- **Truncated or corrupt files**: a bag with ``metadata.yaml`` is read with rosbags' public
+  :class:`rosbags.rosbag2.Reader`; the messages it could not deliver are those ``metadata.yaml`` counts
+  and the files no longer hold (reported per topic, with the unreadable bytes).  A bag without it (a
+  recorder killed before closing the bag), whose metadata or index is unreadable, or whose index fails
+  before the first message, is streamed record by record with the ``mcap`` library's public
+  :class:`~mcap.stream_reader.StreamReader`: every complete record is kept; chunks are parsed strictly
+  here (each record read to its exact length) and their checksums checked; the complete records at the
+  start of a cut or corrupt chunk are kept; a corrupt record is skipped and reading resumes after it.
+  Unreadable bytes and chunks whose checksum fails are reported.
+- **A topic filter naming a topic the bag does not have** is a :class:`BagError` listing the bag's topics
+  (rosbags reads *every* topic when given an empty selection).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
-import struct
+from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator, Optional, Sequence
-
-from rosbags.rosbag2 import Reader
+from typing import Any, Callable, Iterator, Mapping, Optional, Sequence, Union
 
 from ..interfaces import typestore
 from .errors import BagError
@@ -30,73 +43,455 @@ class BagMessage:
     """The rosbags message (fields by their .msg names)."""
 
 
-def read_bag(path: str | Path, topics: Optional[Sequence[str]] = None) -> Iterator[BagMessage]:
-    """Messages of a bag in time order; a bag without metadata (a crashed recorder) is recovered."""
-    path = Path(path)
-    if not path.exists():
-        raise BagError(f"bag {str(path)!r} does not exist")
-    store = typestore()
-    wanted = set(topics) if topics else None
-    if (path / "metadata.yaml").is_file():
-        yielded = 0
+@dataclass
+class ReadReport:
+    """What reading a bag delivered, and everything it could not deliver."""
+
+    path: str
+    delivered: int = 0
+    skipped: dict[str, dict[str, Any]] = dataclasses.field(default_factory=dict)
+    """Messages not delivered because they could not be decoded: topic → {type, count, reason}."""
+    missing: dict[str, int] = dataclasses.field(default_factory=dict)
+    """Messages ``metadata.yaml`` counts that the files no longer hold, by topic."""
+    lost_bytes: int = 0
+    """Bytes of records that could not be read: after the last complete record of a truncated file, a corrupt
+    record skipped, the unparsable rest of a chunk (counted in its uncompressed bytes)."""
+    registered: list[str] = dataclasses.field(default_factory=list)
+    """Types decoded with the definitions embedded in the bag."""
+    recovered: str = ""
+    """Why the bag was read record by record instead of through its index (``""``: it was not)."""
+    suspect: list[str] = dataclasses.field(default_factory=list)
+    """Chunks whose checksum does not match: their messages were read, but may carry corrupt data."""
+
+    def skip(self, topic: str, type_name: str, reason: str) -> None:
+        entry = self.skipped.setdefault(topic, {"type": type_name, "count": 0, "reason": reason})
+        entry["count"] += 1
+
+    @property
+    def complete(self) -> bool:
+        """Whether every message of the bag was delivered."""
+        return not (self.skipped or self.missing or self.lost_bytes or self.suspect)
+
+    def losses(self) -> list[str]:
+        """One line per loss (empty when :attr:`complete`)."""
+        lines = [f"bag {self.path!r}: {e['count']} message(s) on {topic} ({e['type']}) skipped: {e['reason']}"
+                 for topic, e in sorted(self.skipped.items())]
+        if self.missing:
+            per_topic = ", ".join(f"{t} {n}" for t, n in sorted(self.missing.items()))
+            lines.append(f"bag {self.path!r}: {sum(self.missing.values())} message(s) that metadata.yaml lists are "
+                         f"missing from its files (truncated or corrupt): {per_topic}")
+        if self.lost_bytes:
+            lines.append(f"bag {self.path!r}: {self.lost_bytes} byte(s) of records are unreadable (a truncated or "
+                         "corrupt file); their messages are lost")
+        lines += [f"bag {self.path!r}: the {where} fails its checksum; its messages were read but may be corrupt"
+                  for where in self.suspect]
+        return lines
+
+
+Decoder = Union[Callable[[bytes], Any], str]
+"""A function that deserialises one message's CDR, or the reason there is none."""
+
+
+class _Decoders:
+    """A decoder per connection: this installation's types, else the definition embedded in the bag."""
+
+    def __init__(self, report: ReadReport) -> None:
+        self.store = typestore()
+        self.report = report
+        self._cache: dict[tuple[str, str, str], Decoder] = {}
+
+    def get(self, type_name: str, encoding: str, definition: str, digest: Optional[str] = None) -> Decoder:
+        key = (type_name, encoding, definition if digest is None or type_name not in self.store.fielddefs else digest)
+        if key not in self._cache:
+            self._cache[key] = self._make(type_name, encoding, definition, digest)
+        return self._cache[key]
+
+    def _make(self, type_name: str, encoding: str, definition: str, digest: Optional[str]) -> Decoder:
+        known = type_name in self.store.fielddefs
+        if known and (not digest or digest == self.store.hash_rihs01(type_name)):
+            store = self.store
+            return lambda raw: store.deserialize_cdr(raw, type_name)
+        if not definition.strip():
+            return f"type {type_name} is unknown here and the bag holds no definition of it"
         try:
-            with Reader(path) as reader:
-                connections = [c for c in reader.connections if wanted is None or c.topic in wanted]
-                for connection, timestamp, raw in reader.messages(connections=connections):
-                    yield BagMessage(connection.topic, connection.msgtype, timestamp,
-                                     store.deserialize_cdr(raw, connection.msgtype))
-                    yielded += 1
-            return
-        except Exception as exc:  # noqa: BLE001 - rosbags raises many kinds; recover or explain below
-            if yielded:
-                raise BagError(f"bag {str(path)!r} is unreadable after {yielded} messages: {exc}") from None
-            if not sorted(path.glob("*.mcap")):
-                raise BagError(f"bag {str(path)!r} is unreadable: {exc}") from None
-    yield from _recover(path, wanted)
+            from rosbags.typesys import Stores, get_types_from_idl, get_typestore, get_types_from_msg
+
+            if encoding in ("ros2idl", "idl"):
+                sep = "=" * 80 + "\n"
+                parts = [p.split("\n", 1)[1] for p in definition.split(sep)[1:]] if definition.startswith(sep) \
+                    else [definition]
+                types: dict[str, Any] = {}
+                for part in parts:
+                    types.update(get_types_from_idl(part))
+            elif encoding in ("ros2msg", "msg"):
+                types = get_types_from_msg(definition, type_name)
+            else:
+                return f"type {type_name} is unknown here and its definition is in {encoding!r}, not ros2msg/ros2idl"
+            own = get_typestore(Stores.EMPTY)
+            own.register(types)
+            if type_name not in own.fielddefs:
+                return f"the bag's definition of {type_name} does not define it"
+        except Exception as exc:  # noqa: BLE001 - the parsers raise several kinds
+            return f"the bag's definition of {type_name} cannot be parsed: {exc}"
+        self.report.registered.append(type_name + (" (recorded with another definition)" if known else ""))
+        return lambda raw: own.deserialize_cdr(raw, type_name)
 
 
-def _recover(path: Path, wanted: Optional[set[str]]) -> Iterator[BagMessage]:
-    """The messages of the complete records (and chunks) of unfinished MCAP files, in time order per file."""
-    from mcap.exceptions import McapError
+def decode(decoder: Decoder, raw: bytes) -> tuple[Any, str]:
+    """(message, "") or (None, why not)."""
+    if isinstance(decoder, str):
+        return None, decoder
+    try:
+        return decoder(raw), ""
+    except Exception as exc:  # noqa: BLE001 - corrupt CDR raises many kinds
+        return None, f"undecodable CDR ({type(exc).__name__}: {exc})"
+
+
+class _Counting:
+    """A binary stream that counts what was read from it."""
+
+    def __init__(self, stream: Any) -> None:
+        self.stream, self.count = stream, 0
+
+    def read(self, size: int = -1) -> bytes:
+        data = self.stream.read(size)
+        self.count += len(data)
+        return data
+
+
+@dataclass
+class _Stream:
+    """The complete records of one MCAP file, read in order."""
+
+    schemas: dict[int, tuple[str, str, str]]
+    """id → (name, encoding, definition)."""
+    channels: dict[int, tuple[str, int]]
+    """id → (topic, schema id)."""
+    messages: list[tuple[int, int, bytes]]
+    """(channel id, log time, CDR)."""
+    lost_bytes: int
+    suspect: list[int]
+    """File offsets of chunks whose checksum does not match their records."""
+
+
+def _records(data: bytes) -> tuple[list[Any], int]:
+    """The schema, channel and message records at the start of a chunk's (uncompressed) records, parsed strictly:
+    a record must fit in ``data`` and be read to its exact length.  A complete record that does not parse is
+    skipped.  Returns the records and how many bytes of ``data`` they and the skipped ones span (up to the first
+    record that does not fit)."""
+    from io import BytesIO
+
+    from mcap.data_stream import ReadDataStream
+    from mcap.opcode import Opcode
     from mcap.records import Channel, Message, Schema
+
+    records: list[Any] = []
+    position = 0
+    while position + 9 <= len(data):
+        opcode, length = data[position], int.from_bytes(data[position + 1:position + 9], "little")
+        if position + 9 + length > len(data):
+            break
+        body = data[position + 9:position + 9 + length]
+        stream = ReadDataStream(BytesIO(body))
+        try:
+            if opcode == Opcode.MESSAGE and length >= 22:
+                records.append(Message.read(stream, length))
+            elif opcode == Opcode.SCHEMA:
+                records.append(Schema.read(stream))
+            elif opcode == Opcode.CHANNEL:
+                records.append(Channel.read(stream))
+        except Exception:  # noqa: BLE001 - a corrupt record: skipped, the next one is read
+            pass
+        position += 9 + length
+    return records, position
+
+
+def _decompress(compression: str, data: bytes, size: Optional[int] = None) -> Optional[bytes]:
+    """A chunk's records, decompressed as far as ``data`` goes (None: an unknown compression or corrupt data)."""
+    try:
+        if compression == "zstd":
+            import zstandard
+
+            return zstandard.ZstdDecompressor().decompressobj().decompress(data)
+        if compression == "lz4":
+            import lz4.frame
+
+            return lz4.frame.LZ4FrameDecompressor().decompress(data)
+    except Exception:  # noqa: BLE001 - corrupt data: nothing to recover
+        return None
+    return data if not compression else None
+
+
+def _chunk(chunk: Any) -> tuple[list[Any], int, bool]:
+    """The records of a complete chunk record, the bytes of its records that could not be read, and whether its
+    checksum holds (a mismatch: the records read may carry corrupt data)."""
+    import zlib
+
+    data = _decompress(chunk.compression, chunk.data)
+    if data is None:
+        return [], chunk.uncompressed_size or len(chunk.data), False
+    records, good = _records(data)
+    intact = chunk.uncompressed_crc == 0 or zlib.crc32(data) == chunk.uncompressed_crc
+    return records, len(data) - good, intact
+
+
+def _partial_chunk(tail: bytes) -> tuple[list[Any], int]:
+    """The complete records at the start of a truncated chunk (``tail``: the file from the chunk's first byte;
+    uncompressed, zstd or lz4), and how many bytes of ``tail`` they span (0 for a compressed chunk: the
+    compressed bytes they came from are not known, so the whole chunk counts as lost)."""
+    import struct
+
+    from mcap.opcode import Opcode
+
+    head = 1 + 8 + 8 + 8 + 8 + 4  # opcode, length, start and end time, uncompressed size, crc
+    if len(tail) < head + 4 or tail[0] != Opcode.CHUNK:
+        return [], 0
+    (name_length,) = struct.unpack_from("<I", tail, head)
+    start = head + 4 + name_length + 8  # the compression's name, then the records' length
+    compression = tail[head + 4:head + 4 + name_length].decode("utf-8", "replace")
+    data = _decompress(compression, tail[start:])
+    if data is None:
+        return [], 0
+    records, good = _records(data)
+    return records, (start + good if good and not compression else 0)
+
+
+def _stream(file: Path) -> _Stream:
+    """Every complete record of ``file``: no summary, index or footer needed.  Chunks are parsed strictly (a record
+    must be read to its exact length) and their checksums checked.  A record cut short (the end of a killed or
+    truncated file) gives up the complete records at its start (of a chunk); a corrupt record whose length still
+    fits in the file gives up what it can, is skipped, and reading resumes after it."""
+    from mcap.records import Channel, Chunk, Message, Schema
     from mcap.stream_reader import StreamReader
 
-    files = sorted(path.glob("*.mcap")) if path.is_dir() else [path]
-    if not files:
-        raise BagError(f"bag {str(path)!r} has neither metadata.yaml nor an .mcap file")
-    store = typestore()
-    found = False
-    for file in files:
-        schemas: dict[int, str] = {}
-        channels: dict[int, tuple[str, str]] = {}
-        messages: list[BagMessage] = []
-        with open(file, "rb") as stream:
+    found = _Stream({}, {}, [], 0, [])
+
+    def keep(record: Any) -> None:
+        if isinstance(record, Schema):
+            found.schemas[record.id] = (record.name, record.encoding, bytes(record.data).decode("utf-8", "replace"))
+        elif isinstance(record, Channel):
+            found.channels[record.id] = (record.topic, record.schema_id)
+        elif isinstance(record, Message):
+            found.messages.append((record.channel_id, record.log_time, bytes(record.data)))
+
+    size = file.stat().st_size
+    with open(file, "rb") as handle:
+        position, resumed = 0, False
+        while True:
+            handle.seek(position)
+            counting = _Counting(handle)
+            end = position
             try:
-                for record in StreamReader(stream, skip_magic=False).records:
-                    if isinstance(record, Schema):
-                        schemas[record.id] = record.name
-                    elif isinstance(record, Channel):
-                        channels[record.id] = (record.topic, schemas.get(record.schema_id, ""))
-                    elif isinstance(record, Message) and record.channel_id in channels:
-                        topic, type_name = channels[record.channel_id]
-                        if wanted is None or topic in wanted:
-                            messages.append(BagMessage(topic, type_name, record.log_time,
-                                                       store.deserialize_cdr(record.data, type_name)))
-            except (McapError, EOFError, ValueError, KeyError, AssertionError, struct.error) as exc:  # a cut record
-                if not messages and not channels:
-                    raise BagError(f"bag file {str(file)!r} is not a readable MCAP file: {exc}") from None
-            found = found or bool(channels)
-        messages.sort(key=lambda m: m.timestamp_ns)
-        yield from messages
-    if not found:
-        raise BagError(f"bag {str(path)!r} holds no complete chunk or channel record")
+                for record in StreamReader(counting, skip_magic=resumed, emit_chunks=True).records:  # type: ignore[arg-type]
+                    if isinstance(record, Chunk):
+                        records, unread, intact = _chunk(record)
+                        for inner in records:
+                            keep(inner)
+                        found.lost_bytes += unread
+                        if not intact:
+                            found.suspect.append(end)
+                    else:
+                        keep(record)
+                    end = position + counting.count  # a record (a whole chunk) was read to its end
+                break  # up to the footer: the file is complete
+            except Exception:  # noqa: BLE001 - a cut or corrupt file raises many kinds (mcap's, zstd's, struct's)
+                pass
+            if end == 0:
+                raise BagError(f"bag file {str(file)!r} is not a readable MCAP file ({size} bytes, no complete record)")
+            handle.seek(end)
+            head = handle.read(9)  # opcode and length of the record that failed
+            length = int.from_bytes(head[1:9], "little") if len(head) == 9 else size
+            whole = end + 9 + length <= size
+            handle.seek(end)
+            records, span = _partial_chunk(handle.read(9 + length if whole else size - end))
+            for record in records:
+                keep(record)
+            if not whole:  # cut short: the end of the file (an unfinished file ends right after a record: 0 lost)
+                found.lost_bytes += size - end - span
+                break
+            found.lost_bytes += 9 + length - span
+            position, resumed = end + 9 + length, True
+    if not found.channels and not found.messages:
+        raise BagError(f"bag file {str(file)!r} is truncated before its first complete chunk or channel: "
+                       f"{found.lost_bytes} of {size} bytes unreadable, no message can be recovered")
+    return found
 
 
-def bag_info(path: str | Path) -> dict[str, Any]:
-    """Topics, types, counts, rates (Hz) and duration (s)."""
+def _listed_counts(path: Path) -> dict[str, int]:
+    """Messages per topic that a readable ``metadata.yaml`` lists (empty without one)."""
+    import yaml
+
+    try:
+        info = yaml.safe_load((path / "metadata.yaml").read_text(encoding="utf-8"))["rosbag2_bagfile_information"]
+        return {e["topic_metadata"]["name"]: int(e["message_count"]) for e in info["topics_with_message_count"]}
+    except Exception:  # noqa: BLE001 - no file, not YAML, another layout: nothing listed
+        return {}
+
+
+class _IndexFailed(Exception):
+    """rosbags' indexed reading failed before it delivered a message: the files are streamed instead."""
+
+
+class BagReader:
+    """A bag directory (or one ``.mcap`` file) opened for reading; :attr:`topics` and :attr:`report`."""
+
+    def __init__(self, path: str | Path, report: Optional[ReadReport] = None) -> None:
+        self.path = Path(path)
+        if not self.path.exists():
+            raise BagError(f"bag {str(self.path)!r} does not exist")
+        self.report = report if report is not None else ReadReport(str(self.path))
+        self._decoders = _Decoders(self.report)
+        self._indexed: Any = None
+        self._streams: list[_Stream] = []
+        self.topics: dict[str, str] = {}
+        """Topic → message type, every topic of the bag."""
+        self.counts: dict[str, Optional[int]] = {}
+        """Messages per topic that ``metadata.yaml`` lists (None: not listed)."""
+        if (self.path / "metadata.yaml").is_file():
+            from rosbags.rosbag2 import Reader
+
+            try:
+                reader = Reader(self.path)
+                reader.open()
+                self._indexed = reader
+            except Exception as exc:  # noqa: BLE001 - rosbags raises many kinds; recover or explain below
+                if not self._files():
+                    raise BagError(f"bag {str(self.path)!r} is unreadable: {exc or type(exc).__name__}") from None
+                self.report.recovered = f"metadata.yaml or the index is unreadable ({exc or type(exc).__name__})"
+        if self._indexed is not None:
+            for c in self._indexed.connections:
+                self.topics[c.topic] = c.msgtype
+                self.counts[c.topic] = (self.counts.get(c.topic) or 0) + c.msgcount
+            return
+        if not self._files():
+            raise BagError(f"bag {str(self.path)!r} has neither metadata.yaml nor an .mcap file")
+        self.report.recovered = self.report.recovered or "no metadata.yaml (an unfinished bag)"
+        self._load_streams()
+
+    def _files(self) -> list[Path]:
+        return sorted(self.path.glob("*.mcap")) if self.path.is_dir() else [self.path]
+
+    def _load_streams(self) -> None:
+        self._streams = [_stream(f) for f in self._files()]
+        for s in self._streams:
+            for topic, schema in s.channels.values():
+                self.topics.setdefault(topic, s.schemas.get(schema, ("", "", ""))[0])
+        listed = _listed_counts(self.path)
+        self.counts = {t: listed.get(t) for t in set(self.topics) | set(listed)}
+
+    def close(self) -> None:
+        if self._indexed is not None:
+            self._indexed.close()
+            self._indexed = None
+
+    def check(self, topics: Optional[Sequence[str]] = None, types: Optional[Mapping[str, str]] = None) -> None:
+        """:class:`BagError` unless the bag has every topic of ``topics`` and each topic of ``types`` that it
+        has carries that type."""
+        for topic in topics or ():
+            if topic not in self.topics:
+                raise BagError(f"topic {topic!r} is not in bag {str(self.path)!r}; its topics: "
+                               f"{', '.join(sorted(self.topics)) or 'none'}")
+        for topic, expected in (types or {}).items():
+            found = self.topics.get(topic)
+            if found is not None and found != expected:
+                raise BagError(f"topic {topic!r} of bag {str(self.path)!r} carries {found!r}, not {expected!r}")
+
+    def messages(self, topics: Optional[Sequence[str]] = None) -> Iterator[BagMessage]:
+        """The messages (of ``topics``, each of which the bag must have) in time order; what cannot be decoded is
+        skipped and counted in :attr:`report`, and so is what ``metadata.yaml`` lists but the files lack.
+
+        Through the index while it works; if it fails before the first message (a chunk whose checksum does
+        not match, a broken index), the files are streamed instead; if it fails later, :class:`BagError` says
+        after how many messages."""
+        self.check(topics)
+        wanted = set(topics) if topics else set(self.topics)
+        if self._indexed is not None:
+            try:
+                yield from self._indexed_messages(wanted)
+                return
+            except _IndexFailed as exc:
+                self.report.recovered = f"the index failed ({exc})"
+                self.close()
+                self._load_streams()
+        yield from self._streamed_messages(wanted, listed_too=not topics)
+
+    def _indexed_messages(self, wanted: set[str]) -> Iterator[BagMessage]:
+        report = self.report
+        delivered: dict[str, int] = defaultdict(int)
+        connections = [c for c in self._indexed.connections if c.topic in wanted]
+        try:
+            for connection, timestamp, raw in self._indexed.messages(connections=connections):
+                fmt = connection.msgdef.format.name.lower()
+                decoder = self._decoders.get(connection.msgtype, {"msg": "ros2msg", "idl": "ros2idl"}.get(fmt, fmt),
+                                             connection.msgdef.data, connection.digest or None)
+                msg, why = decode(decoder, raw)
+                delivered[connection.topic] += 1
+                if msg is None:
+                    report.skip(connection.topic, connection.msgtype, why)
+                    continue
+                report.delivered += 1
+                yield BagMessage(connection.topic, connection.msgtype, timestamp, msg)
+        except Exception as exc:  # noqa: BLE001 - a corrupt chunk or index: stream the files, or say where it stopped
+            why = str(exc) or type(exc).__name__
+            if not any(delivered.values()):
+                raise _IndexFailed(why) from None
+            raise BagError(f"bag {str(self.path)!r} is unreadable after {report.delivered} messages: {why}") from None
+        self._count_missing(wanted, delivered)
+        if report.missing:
+            streams = [_stream(f) for f in self._files()]
+            report.lost_bytes = sum(s.lost_bytes for s in streams)
+            report.suspect = [f"chunk at byte {o}" for s in streams for o in s.suspect]
+
+    def _streamed_messages(self, wanted: set[str], listed_too: bool) -> Iterator[BagMessage]:
+        report = self.report
+        report.lost_bytes = sum(s.lost_bytes for s in self._streams)
+        report.suspect = [f"chunk at byte {o}" for s in self._streams for o in s.suspect]
+        found: list[tuple[int, int, str, str, Decoder, bytes]] = []
+        for index, s in enumerate(self._streams):
+            for channel_id, log_time, raw in s.messages:
+                topic, schema_id = s.channels[channel_id]
+                if topic not in wanted:
+                    continue
+                name, encoding, definition = s.schemas.get(schema_id, ("", "", ""))
+                found.append((log_time, index, topic, name, self._decoders.get(name, encoding, definition), raw))
+        found.sort(key=lambda m: (m[0], m[1]))
+        read: dict[str, int] = defaultdict(int)
+        for log_time, _index, topic, name, decoder, raw in found:
+            read[topic] += 1
+            msg, why = decode(decoder, raw)
+            if msg is None:
+                report.skip(topic, name, why)
+                continue
+            report.delivered += 1
+            yield BagMessage(topic, name, log_time, msg)
+        self._count_missing(wanted | ({t for t, n in self.counts.items() if n} if listed_too else set()), read)
+
+    def _count_missing(self, topics: set[str], read: Mapping[str, int]) -> None:
+        """What ``metadata.yaml`` lists on ``topics`` beyond what the files held (``read``: messages found)."""
+        for topic in topics:
+            lacking = (self.counts.get(topic) or 0) - read.get(topic, 0)
+            if lacking > 0:
+                self.report.missing[topic] = lacking
+
+
+def read_bag(path: str | Path, topics: Optional[Sequence[str]] = None,
+             report: Optional[ReadReport] = None) -> Iterator[BagMessage]:
+    """Messages of a bag in time order (of ``topics``, which the bag must have); a bag without metadata (a crashed
+    recorder) is recovered.  Pass a :class:`ReadReport` to learn what could not be read."""
+    reader = BagReader(path, report)
+    try:
+        yield from reader.messages(topics)
+    finally:
+        reader.close()
+
+
+def bag_info(path: str | Path, report: Optional[ReadReport] = None) -> dict[str, Any]:
+    """Topics, types, counts, rates (Hz) and duration (s); ``losses``: what could not be read, one line each;
+    ``registered_types``: types decoded with the definitions embedded in the bag."""
     stats: dict[str, dict[str, Any]] = {}
     first = last = None
-    for m in read_bag(path):
+    report = report if report is not None else ReadReport(str(path))
+    for m in read_bag(path, report=report):
         entry = stats.setdefault(m.topic, {"type": m.type_name, "count": 0, "first": m.timestamp_ns, "last": m.timestamp_ns})
         entry["count"] += 1
         entry["last"] = m.timestamp_ns
@@ -107,4 +502,5 @@ def bag_info(path: str | Path) -> dict[str, Any]:
     for topic, e in sorted(stats.items()):
         span = (e["last"] - e["first"]) * 1e-9
         topics[topic] = {"type": e["type"], "count": e["count"], "rate_hz": (e["count"] - 1) / span if span > 0 else math.nan}
-    return {"path": str(path), "duration_s": duration, "messages": sum(e["count"] for e in stats.values()), "topics": topics}
+    return {"path": str(path), "duration_s": duration, "messages": sum(e["count"] for e in stats.values()),
+            "topics": topics, "losses": report.losses(), "registered_types": list(report.registered)}

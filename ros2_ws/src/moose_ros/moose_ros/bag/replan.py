@@ -14,11 +14,11 @@ from ..graph import BLEND, PLAN_MPC, PLAN_MSF, STATE, THREAT
 from ..interfaces import from_rosbags
 from .errors import BagError
 from .params import read_run_parameters
-from .reader import read_bag
+from .reader import BagReader, ReadReport
 
 
-def replan(path: str | Path, config: Any = None, planner: Optional[str] = None,
-           v_des: Optional[float] = None) -> dict[str, Any]:
+def replan(path: str | Path, config: Any = None, planner: Optional[str] = None, v_des: Optional[float] = None,
+           report: Optional[ReadReport] = None) -> dict[str, Any]:
     """Run the planners open-loop on a bag's recorded state/threat stream at its planning instants.
 
     Each instant (a recorded /planning/blend) gets the latest recorded estimate and threat;
@@ -28,35 +28,63 @@ def replan(path: str | Path, config: Any = None, planner: Optional[str] = None,
     until the first threat, then its v_des), without one to the speed at the first recorded estimate.
     Returns per-step rows (recorded vs re-computed first accelerations, weights, statuses) and a summary
     that says which parameters were used (``parameters``: ``given``, ``bag`` or ``default``).
-    """
-    import numpy as np
 
+    The bag must have /perception/state and /planning/blend, and each topic used must carry the graph's type
+    (:class:`BagError` otherwise).  A recorded message that fails validation (:mod:`moose_ros.convert`) is
+    skipped and counted in ``report`` and in the summary's ``invalid_messages``.
+    """
     from moose.config import load_config
     from moose.planning import PlanningStep
 
+    used = (STATE, THREAT, PLAN_MPC, PLAN_MSF, BLEND)
+    reader = BagReader(path, report)
+    try:
+        reader.check([STATE.name, BLEND.name], {t.name: t.type for t in used})
+        run = read_run_parameters(path)
+        source = "given" if config is not None else ("bag" if run is not None else "default")
+        config = config if config is not None else (run.config if run is not None else load_config())
+        planner = planner or (run.planner if run is not None else "combined")
+        step = PlanningStep(config, planner)  # type: ignore[arg-type]
+        result = _replan(reader, [t.name for t in used if t.name in reader.topics], step, planner, v_des,
+                         run.scenario if run is not None and v_des is None else None)
+    finally:
+        reader.close()
+    result["summary"].update({"parameters": source, "scenario": run.scenario.name if run is not None else None,
+                              "road_mu": config.vehicle.mu})
+    return result
+
+
+def _replan(reader: BagReader, topics: list[str], step: Any, planner: str, v_des: Optional[float],
+            scenario: Any) -> dict[str, Any]:
+    import numpy as np
+
     from .. import convert as cv
 
-    run = read_run_parameters(path)
-    source = "given" if config is not None else ("bag" if run is not None else "default")
-    config = config if config is not None else (run.config if run is not None else load_config())
-    planner = planner or (run.planner if run is not None else "combined")
-    scenario = run.scenario if run is not None and v_des is None else None
-    step = PlanningStep(config, planner)  # type: ignore[arg-type]
+    report = reader.report
     estimate = threat = None
     detected = False
     recorded_plans: dict[str, dict[float, Any]] = {"mpc": {}, "msf": {}}
     rows = []
-    for m in read_bag(path, [STATE.name, THREAT.name, PLAN_MPC.name, PLAN_MSF.name, BLEND.name]):
+    invalid = 0
+    for m in reader.messages(topics):
         msg = from_rosbags(m.msg, m.type_name)
-        if m.topic == STATE.name:
-            estimate = cv.estimate_from_msg(msg)
-            v_des = round(estimate.vx, 1) if v_des is None and scenario is None else v_des
-        elif m.topic == THREAT.name:
-            threat = cv.threat_from_msg(msg)
-            detected = detected or threat is not None
-        elif m.topic in (PLAN_MPC.name, PLAN_MSF.name):
-            recorded_plans[msg.planner][round(cv.time_of(msg), 6)] = cv.plan_from_msg(msg)
-        elif estimate is not None:
+        try:
+            if m.topic == STATE.name:
+                estimate = cv.estimate_from_msg(msg)
+                v_des = round(estimate.vx, 1) if v_des is None and scenario is None else v_des
+            elif m.topic == THREAT.name:
+                threat = cv.threat_from_msg(msg)
+                detected = detected or threat is not None
+            elif m.topic in (PLAN_MPC.name, PLAN_MSF.name):
+                t, _, plan = cv.stamped_plan_from_msg(msg)
+                recorded_plans["mpc" if m.topic == PLAN_MPC.name else "msf"][round(t, 6)] = plan
+            else:
+                cv.blend_from_msg(msg)
+        except cv.InvalidMessage as exc:
+            invalid += 1
+            report.skip(m.topic, m.type_name, f"invalid: {exc}")
+            continue
+        if m.topic == BLEND.name and estimate is not None:
             t = cv.time_of(msg)
             speed = scenario.desired_speed(detected) if scenario is not None else v_des
             record = step.plan(t, estimate, threat, float(speed))
@@ -73,15 +101,15 @@ def replan(path: str | Path, config: Any = None, planner: Optional[str] = None,
                 "mpc_solve_ms": new_mpc.solve_time_s * 1e3 if new_mpc is not None else math.nan,
             })
     if not rows:
-        raise BagError(f"bag {str(path)!r} has no planning instants ({BLEND.name} with {STATE.name})")
+        raise BagError(f"bag {str(reader.path)!r} has no planning instants ({BLEND.name} with {STATE.name})")
     diff = lambda a, b: float(np.sqrt(np.mean([(r[a] - r[b]) ** 2 for r in rows])))  # noqa: E731
     same = [r for r in rows if r["recorded_mpc_status"]]
     summary = {
-        "steps": len(rows), "planner": planner, "parameters": source,
-        "scenario": run.scenario.name if run is not None else None, "road_mu": config.vehicle.mu,
+        "steps": len(rows), "planner": planner,
         "rms_ax": diff("recorded_ax", "ax"), "rms_ay": diff("recorded_ay", "ay"),
         "rms_weight": diff("recorded_weight", "weight"), "rms_delta": diff("recorded_delta", "delta"),
         "mpc_status_agreement": (sum(r["recorded_mpc_status"] == r["mpc_status"] for r in same) / len(same)) if same else None,
+        "invalid_messages": invalid,
     }
     return {"summary": summary, "rows": rows}
 

@@ -10,7 +10,7 @@ from typing import Any
 from ..convert import MARKER_COLOURS
 from ..graph import FRAME_BASE, MARKERS, ODOM, TF
 from .errors import BagError
-from .reader import read_bag
+from .reader import BagReader
 
 _LABELS = {"mpc": "MPC prediction", "msf": "MSF prediction", "blend": "blended plan"}
 
@@ -26,7 +26,15 @@ def plot_birdseye(path: str | Path, out: str | Path, title: str = "") -> Path:
     truth: list[tuple[float, float]] = []
     estimate: list[tuple[float, float]] = []
     instants: list[Any] = []
-    for m in read_bag(path, [ODOM.name, TF.name, MARKERS.name]):
+    reader = BagReader(path)
+    try:
+        needed = (ODOM.name, MARKERS.name)
+        if not set(needed) <= set(reader.topics):
+            raise BagError(f"bag {str(path)!r} has no {ODOM.name} or no {MARKERS.name} to draw")
+        messages = list(reader.messages([t for t in (*needed, TF.name) if t in reader.topics]))
+    finally:
+        reader.close()
+    for m in messages:
         if m.topic == ODOM.name:
             truth.append((m.msg.pose.pose.position.x, m.msg.pose.pose.position.y))
         elif m.topic == TF.name:

@@ -1,12 +1,19 @@
-"""``moose bag``: record, play, inspect, export and re-plan ROS 2 bags (MCAP)."""
+"""``moose bag``: record, play, inspect, export and re-plan ROS 2 bags (MCAP).
+
+Reading commands (info, play, export, replan) report every message they could not read on stderr
+(``moose: warning: …``) and then exit with status 1 (:data:`moose.cli.common.EXIT_FAILED`); a topic the bag
+does not have, a topic of the graph with another type, or an unusable output path is an error (status 2)
+before anything is done.
+"""
 from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
-from moose.cli.common import positive_float, run_folder
+from moose.cli.common import EXIT_CLEAR, EXIT_FAILED, check_output_file, plot_suffixes, positive_float, run_folder
 from moose.params import ParamError
 
 
@@ -49,20 +56,24 @@ def add_subparser(subparsers: Any) -> None:
 def cmd_bag(args: argparse.Namespace) -> int:
     from .. import bag
 
+    report = bag.ReadReport(getattr(args, "path", ""))
     try:
         if args.bag_command == "info":
-            info = bag.bag_info(args.path)
+            info = bag.bag_info(args.path, report)
             print(f"bag       {info['path']}\nduration  {info['duration_s']:.3f} s\nmessages  {info['messages']}")
             for topic, e in info["topics"].items():
                 print(f"  {topic:<28} {e['type']:<36} {e['count']:>7}  {e['rate_hz']:8.2f} Hz")
+            for type_name in info["registered_types"]:
+                print(f"  (decoded with the bag's own definition: {type_name})")
         elif args.bag_command == "export":
-            for path in bag.export(args.path, args.output, args.topics, args.format):
+            for path in bag.export(args.path, args.output, args.topics, args.format, report):
                 print(path)
         elif args.bag_command == "replan":
             from moose.config import load_config
 
+            plot = check_output_file("--plot", args.plot, plot_suffixes()) if args.plot is not None else None
             config = load_config(args.params) if args.params else None
-            result = bag.replan(args.path, config, args.planner, args.v_des)
+            result = bag.replan(args.path, config, args.planner, args.v_des, report)
             summary = result["summary"]
             print({"given": f"parameters      {args.params}",
                    "bag": f"parameters      the run's (bag): scenario {summary['scenario']}, road μ {summary['road_mu']}",
@@ -72,9 +83,9 @@ def cmd_bag(args: argparse.Namespace) -> int:
             for r in result["rows"]:
                 print(f"{r['t']:7.2f}   {r['recorded_weight']:5.2f} / {r['weight']:5.2f}   {r['recorded_ay']:8.3f} / {r['ay']:8.3f}"
                       f"      {r['recorded_delta']:6.3f} / {r['delta']:6.3f}     {r['recorded_mpc_status'] or '-'} / {r['mpc_status'] or '-'}")
-            print(json.dumps(summary, indent=2))
-            if args.plot:
-                print(f"figure {bag.plot_replan(result['rows'], args.plot)}")
+            print(json.dumps(summary, indent=2, allow_nan=False))
+            if plot is not None:
+                print(f"figure {bag.plot_replan(result['rows'], plot)}")
         elif args.bag_command == "view":
             print(f"figure {bag.plot_birdseye(args.path, args.output)}")
         elif args.bag_command == "record":
@@ -83,12 +94,17 @@ def cmd_bag(args: argparse.Namespace) -> int:
             from ..runtime import DdsNode
 
             node = DdsNode("moose_bag_play")
-            sent = bag.play(args.path, node, rate=args.rate, topics=args.topics, loop=args.loop, start=args.start,
-                            clock=args.clock)
+            try:
+                sent = bag.play(args.path, node, rate=args.rate, topics=args.topics, loop=args.loop, start=args.start,
+                                clock=args.clock, report=report)
+            finally:
+                node.shutdown()
             print(f"played {sent} messages")
     except bag.BagError as exc:
         raise ParamError(str(exc)) from None
-    return 0
+    for line in report.losses():
+        print(f"moose: warning: {line}", file=sys.stderr)
+    return EXIT_CLEAR if report.complete else EXIT_FAILED
 
 
 def _record(bag: Any, args: argparse.Namespace) -> int:

@@ -4,10 +4,11 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-from pathlib import Path
 from typing import Any
 
-from moose.cli.common import add_scenario_arguments, positive_float, run_folder, scenario_from_args
+from moose.cli.common import (
+    add_scenario_arguments, check_output_dir, check_output_file, positive_float, run_folder, scenario_from_args,
+)
 from moose.cli.simulate import format_summary
 from moose.params import ParamError
 
@@ -47,7 +48,9 @@ def cmd_launch(args: argparse.Namespace) -> int:
     if args.mu_estimate is not None:  # the friction every node assumes: one value for the whole graph
         params["planning.mu_estimate"] = args.mu_estimate
     planner = planner_mode(args.planner, args.config)
-    bag = None if args.no_bag else (Path(args.bag) if args.bag else run_folder(scenario.name, planner) / "bag")
+    json_path = check_output_file("--json", args.json)  # before the run: nothing is lost at its end
+    bag = None if args.no_bag else (check_output_dir("--bag", args.bag) if args.bag is not None
+                                    else run_folder(scenario.name, planner) / "bag")
     try:
         summary = launch(scenario, params, graph=args.graph, planner=planner, seed=args.seed, params_file=args.config,
                          rate=args.rate, bag=bag,
@@ -58,7 +61,6 @@ def cmd_launch(args: argparse.Namespace) -> int:
     print(f"node exits      {summary['node_exits']}")
     if bag is not None:
         print(f"bag             {bag}")
-    if args.json:
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    if json_path is not None:
+        json_path.write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n", encoding="utf-8")
     return 0

@@ -57,7 +57,7 @@ def run(name: str, argv: Sequence[str] = ()) -> int:
     rt = create_node(name, args.params, parse_overrides(args.param))
     node = cls(rt)
     node.publish_diagnostics()  # announce: the simulator starts the clock when every node has
-    rt.log_info(f"{name} started")
+    rt.log_info(f"{name} started (DDS discovery {rt.discovery.describe()})")
     try:
         rt.spin()
     except KeyboardInterrupt:

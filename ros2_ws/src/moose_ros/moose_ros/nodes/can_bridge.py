@@ -15,6 +15,7 @@ from typing import Any
 from moose.canbus.bus import BusParams
 from moose.canbus.runner import BridgeParams, BridgeRunner
 from moose.canbus.safety import Command, GuardParams
+from moose.signals import ActuatorCommand
 
 from ..graph import ACTUATOR_COMMAND
 from .base import GraphNode, sensor_publishers
@@ -37,13 +38,14 @@ class CanBridge(GraphNode):
         self.simulated = bool(getattr(rt, "use_sim_time", False))
         self.runner = BridgeRunner(params, log=p.can_log, clock=rt.now if self.simulated else time.monotonic)
         self.pub = sensor_publishers(rt, rt.now())
-        ACTUATOR_COMMAND.subscription(rt, self.on_command)
+        self.subscribe(ACTUATOR_COMMAND, self.on_command)
         rt.timer(COMMAND_PERIOD, self.tick)
         if not self.simulated:
             self.runner.start()  # the sender thread, real time; this thread runs the callbacks
 
-    def on_command(self, msg: Any) -> None:
-        self.runner.command(Command(msg.steering_angle, msg.steering_rate, msg.torque_rl, msg.torque_rr))
+    def on_command(self, command: ActuatorCommand) -> None:
+        c = command
+        self.runner.command(Command(c.steering_angle, c.steering_rate, c.torque_rl, c.torque_rr))
 
     def tick(self) -> None:
         if self.simulated:

@@ -4,6 +4,7 @@ from __future__ import annotations
 from typing import Any
 
 from moose.detector import ObstacleDetector
+from moose.signals import StateEstimate
 
 from .. import convert as cv
 from ..graph import OBSTACLES, STATE, THREAT
@@ -20,9 +21,8 @@ class Detector(GraphNode):
         self.detector = ObstacleDetector(self.config.detector, self.table())
         self.obstacles: list = []
         self.pub = THREAT.publisher(rt)
-        OBSTACLES.subscription(rt, lambda m: setattr(self, "obstacles", [cv.obstacle_from_msg(o) for o in m.obstacles]))
-        STATE.subscription(rt, self.on_state)
+        self.subscribe(OBSTACLES, lambda obstacles: setattr(self, "obstacles", obstacles))
+        self.subscribe(STATE, self.on_state)
 
-    def on_state(self, msg: Any) -> None:
-        estimate = cv.estimate_from_msg(msg)
+    def on_state(self, estimate: StateEstimate) -> None:
         self.pub(cv.threat_to_msg(self.rt, estimate.t, self.detector.update(estimate.t, estimate, self.obstacles)))

@@ -27,13 +27,13 @@ class Motion(GraphNode):
         self.reference: Optional[Reference] = None
         self.delta = 0.0
         self.pub = ACTUATOR_COMMAND.publisher(rt)
-        STATE.subscription(rt, self.on_state)
-        REFERENCE.subscription(rt, lambda m: setattr(self, "reference", cv.reference_from_msg(m)))
-        STEERING.subscription(rt, lambda m: setattr(self, "delta", m.delta))
+        self.subscribe(STATE, self.on_state)
+        self.subscribe(REFERENCE, lambda reference: setattr(self, "reference", reference))
+        self.subscribe(STEERING, lambda sample: setattr(self, "delta", sample.delta))
         self.dt = 1.0 / self.config.simulation.motion_rate_hz
 
-    def on_state(self, msg: Any) -> None:
-        self.estimate = cv.estimate_from_msg(msg)
+    def on_state(self, estimate: StateEstimate) -> None:
+        self.estimate = estimate
         reference = self.reference or Reference(0.0, self.estimate.vx)
         u = self.controller.step(reference, self.estimate, self.delta, self.dt)
         self.pub(cv.actuator_to_msg(self.rt, self.estimate.t, reference, u))

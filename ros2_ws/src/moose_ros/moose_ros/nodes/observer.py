@@ -27,10 +27,9 @@ class Observer(GraphNode):
         self.pub = STATE.publisher(rt)
         self.pub_tf = TF.publisher(rt)
         self.dropped = 0
-        IMU.subscription(rt, lambda m: self.feed(cv.imu_from_msg(m), True))
-        GPS.subscription(rt, lambda m: self.feed(cv.gps_from_msg(m, self.rt.now())))
-        WHEEL_SPEEDS.subscription(rt, lambda m: self.feed(cv.wheels_from_msg(m)))
-        STEERING.subscription(rt, lambda m: self.feed(cv.steering_from_msg(m)))
+        self.subscribe(IMU, lambda sample: self.feed(sample, True))
+        for topic in (GPS, WHEEL_SPEEDS, STEERING):
+            self.subscribe(topic, self.feed)
 
     def feed(self, sample: Any, publish: bool = False) -> None:
         try:

@@ -1,12 +1,13 @@
 """``mpc_planner`` and ``msf_planner``: a planner at the planning rate, and at once on a new obstacle."""
 from __future__ import annotations
 
+import math
 from typing import Any, Optional
 
 import numpy as np
 
 from moose.planning import new_obstacle
-from moose.signals import Blend, PlannerInput, StateEstimate, Threat
+from moose.signals import PlannerInput, StateEstimate, Threat
 from moose.weight import WeightFunction
 
 from .. import convert as cv
@@ -29,8 +30,8 @@ class Planner(GraphNode):
         self.detected = False
         self.guess: Optional[np.ndarray] = None
         self.pub = PLANS[self.kind].publisher(rt)
-        STATE.subscription(rt, lambda m: setattr(self, "estimate", cv.estimate_from_msg(m)))
-        THREAT.subscription(rt, self.on_threat)
+        self.subscribe(STATE, lambda estimate: setattr(self, "estimate", estimate))
+        self.subscribe(THREAT, self.on_threat)
         self.period = self.config.planning.t_s
         self.next_plan = 0.0
         """Time of the next planning instant: every t_s, restarted by a new obstacle (as the lockstep loop)."""
@@ -39,14 +40,13 @@ class Planner(GraphNode):
     def make_planner(self) -> Any:
         raise NotImplementedError
 
-    def on_threat(self, msg: Any) -> None:
-        threat = cv.threat_from_msg(msg)
+    def on_threat(self, threat: Optional[Threat]) -> None:
         replan = new_obstacle(self.threat, threat)
         self.threat = threat
         self.detected = self.detected or threat is not None
-        if replan:  # at the detection's instant (the threat's stamp); the planning period restarts there
-            self.plan(cv.time_of(msg))
-            self.next_plan = cv.time_of(msg) + self.period
+        if replan and threat is not None:  # at the detection's instant (the threat's); the period restarts there
+            self.plan(threat.t)
+            self.next_plan = threat.t + self.period
 
     def on_tick(self) -> None:
         """The motion-rate tick: plan when the planning instant is due, stamped with the instant itself, so
@@ -55,8 +55,7 @@ class Planner(GraphNode):
         now = self.rt.now()
         if now >= self.next_plan - 1e-6:
             instant = self.next_plan
-            while self.next_plan <= now + 1e-6:
-                self.next_plan += self.period
+            self.next_plan += self.period * (math.floor((now + 1e-6 - instant) / self.period) + 1)  # the next due
             self.plan(instant if now - instant < self.period else now)
 
     @property
@@ -83,8 +82,7 @@ class MpcPlannerNode(Planner):
 
     def __init__(self, rt: Any) -> None:
         super().__init__(rt)
-        BLEND.subscription(rt, lambda m: setattr(
-            self, "guess", WeightFunction.next_initial_guess(Blend(m.weight_mpc, cv.blend_accel(m)))))
+        self.subscribe(BLEND, lambda blend: setattr(self, "guess", WeightFunction.next_initial_guess(blend)))
 
     def make_planner(self) -> Any:
         from moose.mpc import MpcPlanner

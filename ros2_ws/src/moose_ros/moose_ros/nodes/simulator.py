@@ -8,6 +8,7 @@ from typing import Any, Optional
 import numpy as np
 
 from moose.sensors import Sensors
+from moose.signals import ActuatorCommand
 from moose.vehicle import VehiclePlant, initial_state
 
 from .. import convert as cv
@@ -25,11 +26,10 @@ class TopicVehicleIo:
         self.u = np.zeros(3)
         self.last_command = -math.inf
         self.pub = sensor_publishers(rt, 0.0)  # simulated time starts at 0
-        ACTUATOR_COMMAND.subscription(rt, self.on_command)
+        node.subscribe(ACTUATOR_COMMAND, self.on_command)
 
-    def on_command(self, msg: Any) -> None:
-        u = np.array([msg.steering_rate, msg.torque_rl, msg.torque_rr], dtype=float)
-        self.u = u if np.all(np.isfinite(u)) else np.zeros(3)
+    def on_command(self, command: ActuatorCommand) -> None:
+        self.u = np.array([command.steering_rate, command.torque_rl, command.torque_rr], dtype=float)
         self.last_command = self.node.t
 
     def send(self, sample: Any, t: float) -> None:
@@ -99,13 +99,13 @@ class VehicleSimulator(GraphNode):
         self.waiting = set(self.params.wait_for)
         self.startup_deadline = self.params.startup_timeout
         self.wall_start: Optional[float] = None
-        DIAGNOSTICS.subscription(rt, self.on_diagnostics)
+        self.subscribe(DIAGNOSTICS, self.on_diagnostics)
         # wall-clock pacing: one motion step every dt / rate seconds; simulated time is published on /clock
         rt.timer(self.dt / self.params.rate, self.step)
 
-    def on_diagnostics(self, msg: Any) -> None:
-        for status in msg.status:
-            self.waiting.discard(status.name)
+    def on_diagnostics(self, statuses: list[tuple[str, int, str]]) -> None:
+        for name, _level, _message in statuses:
+            self.waiting.discard(name)
 
     def step(self) -> None:
         if self.finished:

@@ -10,7 +10,7 @@ import math
 from typing import Any, Optional
 
 from moose.planning import PlanningStep, blend_path
-from moose.signals import StateEstimate, Threat
+from moose.signals import PlanResult, StateEstimate, Threat
 
 from .. import convert as cv
 from ..graph import BLEND, MARKERS, PLAN_MPC, PLAN_MSF, REFERENCE, STATE, THREAT
@@ -37,16 +37,16 @@ class WeightFbl(GraphNode):
         self.pub_blend = BLEND.publisher(rt)
         self.pub_ref = REFERENCE.publisher(rt)
         self.pub_markers = MARKERS.publisher(rt)
-        STATE.subscription(rt, self.on_state)
-        THREAT.subscription(rt, lambda m: setattr(self, "threat", cv.threat_from_msg(m)))
-        PLAN_MPC.subscription(rt, lambda m: self.on_plan("mpc", m))
-        PLAN_MSF.subscription(rt, lambda m: self.on_plan("msf", m))
+        self.subscribe(STATE, self.on_state)
+        self.subscribe(THREAT, lambda threat: setattr(self, "threat", threat))
+        self.subscribe(PLAN_MPC, lambda plan: self.on_plan("mpc", plan))
+        self.subscribe(PLAN_MSF, lambda plan: self.on_plan("msf", plan))
 
-    def on_plan(self, kind: str, msg: Any) -> None:
-        t = cv.time_of(msg)
-        if t < self.blended - 1e-6:
+    def on_plan(self, kind: str, plan: tuple[float, bool, PlanResult]) -> None:
+        """(instant, planned against a threat, plan) of one planner."""
+        if plan[0] < self.blended - 1e-6:
             return  # a plan for an instant already blended without it (it came too late)
-        self.pending[kind] = (t, bool(msg.with_threat), cv.plan_from_msg(msg))
+        self.pending[kind] = plan
         self.try_blend()
 
     def try_blend(self) -> None:
@@ -78,8 +78,8 @@ class WeightFbl(GraphNode):
         self.pub_markers(cv.markers_to_msg(self.rt, t, record.threat, record.mpc, record.msf,
                                            blend_path(record.blend, self.estimate, self.step.grid.t_s)))
 
-    def on_state(self, msg: Any) -> None:
-        self.estimate = cv.estimate_from_msg(msg)
+    def on_state(self, estimate: StateEstimate) -> None:
+        self.estimate = estimate
         if "msf" in self.pending and self.mode == "combined":
             self.try_blend()
         reference = self.step.reference_between(self.estimate)

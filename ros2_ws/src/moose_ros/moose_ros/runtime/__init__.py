@@ -14,8 +14,9 @@ Message types are named ``pkg/msg/Type``; message objects have the ``.msg`` fiel
 backends (generated rclpy classes, or the DDS dataclasses of :mod:`moose_ros.interfaces`).
 
 Modules: :mod:`.qos` (profiles), :mod:`.names` (ROS 2 names), :mod:`.base` (the node base class:
-parameters, logging, life cycle), :mod:`.dds` (the Cyclone DDS backend with rmw_cyclonedds' wire
-conventions and its executor), :mod:`.rclpy_node` (the rclpy backend).  The backends import their
+parameters, logging, life cycle), :mod:`.discovery` (how far DDS discovery reaches: this host by
+default, ``ROS_AUTOMATIC_DISCOVERY_RANGE`` to opt in), :mod:`.dds` (the Cyclone DDS backend with
+rmw_cyclonedds' wire conventions and its executor), :mod:`.rclpy_node` (the rclpy backend).  The backends import their
 middleware only when a node is created.
 """
 from __future__ import annotations

@@ -2,7 +2,10 @@
 
 The ROS topic ``/ns/x`` is the DDS topic ``rt/ns/x``, type names are ``pkg::msg::dds_::Type_``, data
 is XCDR1 little-endian CDR, the domain comes from ``ROS_DOMAIN_ID`` (default 0) and QoS profiles map
-one to one (:class:`~moose_ros.runtime.qos.Qos`).  The executor is a single thread, like rclpy's
+one to one (:class:`~moose_ros.runtime.qos.Qos`).  Discovery follows ``ROS_AUTOMATIC_DISCOVERY_RANGE``
+and ``ROS_STATIC_PEERS``, confined to this host by default (:mod:`.discovery`): the process creates its
+Cyclone DDS domain with that configuration (then ``CYCLONEDDS_URI``), and every node of the process
+shares it.  The executor is a single thread, like rclpy's
 SingleThreadedExecutor: ``spin`` blocks on a DDS WaitSet (readers, a guard condition for shutdown)
 with a timeout up to the next timer, takes what the readers hold and runs the callbacks in
 publication order (source timestamps), then the timers that are due.  Samples stay in the DDS
@@ -43,6 +46,7 @@ from typing import Any, Callable, Optional
 from moose.params import ParamError
 
 from .base import Handle, NodeBase, Publisher, check_period
+from .discovery import Discovery
 from .names import CLOCK_TOPIC, CLOCK_TYPE, dds_topic_name
 from .qos import QOS_CLOCK_READER, QOS_DEFAULT, QOS_LATCHED, Qos
 
@@ -115,6 +119,8 @@ class DdsNode(NodeBase):
         if not raw.isdigit() or int(raw) > 232:
             raise ParamError(f"ROS_DOMAIN_ID = {raw!r} is invalid: expected an integer 0..232")
         self.domain_id = int(raw)
+        self.discovery = Discovery.from_environ()
+        _create_domain(self.domain_id, self.discovery)
         self.participant = DomainParticipant(self.domain_id, qos=DdsQos(Policy.Userdata(participant_user_data())))
         self._waitset = WaitSet(self.participant)
         self._guard = GuardCondition(self.participant)
@@ -424,6 +430,32 @@ class DdsNode(NodeBase):
         # deleting the participant deletes its readers, writers, topics and waitset in Cyclone DDS
         participant.__del__()
         self._readers, self._writers, self._topics, self._discovery = [], [], {}, []
+
+
+_DOMAINS: dict[int, tuple[Optional[str], Any]] = {}
+"""The Cyclone DDS domains this process created: id → (configuration, Domain), kept for the process's life."""
+
+
+def _create_domain(domain_id: int, discovery: Discovery) -> None:
+    """Create domain ``domain_id`` with ``discovery``'s configuration, once per process; a later node of the
+    process must ask for the same configuration (a :class:`ParamError` otherwise, as rmw_cyclonedds refuses
+    nodes with other discovery options in one domain)."""
+    from cyclonedds.core import DDSException
+    from cyclonedds.domain import Domain
+
+    config = discovery.cyclone_config()
+    known = _DOMAINS.get(domain_id)
+    if known is not None:
+        if known[0] != config:
+            raise ParamError(f"DDS domain {domain_id} already runs in this process with other discovery settings; "
+                             f"a node cannot join it with {discovery.describe()}")
+        return
+    try:
+        _DOMAINS[domain_id] = (config, Domain(domain_id, config) if config is not None else None)
+    except DDSException as exc:
+        raise ParamError(f"Cyclone DDS cannot create domain {domain_id} with discovery {discovery.describe()}: {exc} "
+                         "(is CYCLONEDDS_URI valid, and was no participant of this domain made outside moose_ros "
+                         "first?)") from None
 
 
 def _endpoint_qos(qos: Any, kind: str) -> tuple[bool, bool]:

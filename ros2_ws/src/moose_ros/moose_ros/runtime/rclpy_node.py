@@ -1,13 +1,20 @@
 """The rclpy backend: the runtime's node API on a real ROS 2 node (generated message classes, rclpy's
-SingleThreadedExecutor, parameters visible to ``ros2 param``)."""
+SingleThreadedExecutor, parameters visible to ``ros2 param``).
+
+Discovery is ROS 2's own (``ROS_AUTOMATIC_DISCOVERY_RANGE``, ``ROS_STATIC_PEERS``), with this project's
+default: before the node initialises rclpy it sets the variables of :meth:`.discovery.Discovery.ros_environment`
+(``LOCALHOST`` when the range is unset, and for rmw_cyclonedds the loopback binding in ``CYCLONEDDS_URI``),
+so a node started by ``ros2 run``/``ros2 launch`` stays on this host unless the user opts in."""
 from __future__ import annotations
 
+import os
 import time
 from typing import Any, Callable, Optional
 
 from moose.params import ParamError
 
 from .base import Handle, NodeBase, Publisher, check_period, flatten_params, set_dotted
+from .discovery import Discovery
 from .qos import QOS_DEFAULT, Qos
 
 
@@ -24,7 +31,9 @@ class RclpyNode(NodeBase):
         super().__init__(name, params_file, overrides or {}, namespace)
         self._rclpy = rclpy
         self._owns_context = False
+        self.discovery = Discovery.from_environ()
         if not rclpy.ok():
+            os.environ.update(self.discovery.ros_environment())  # read by rcl and the RMW in rclpy.init
             rclpy.init(args=None)  # sys.argv: `ros2 run/launch` pass --ros-args (params files, remaps) there
             self._owns_context = True
         # our --params file and overrides become parameter overrides (they win over --ros-args ones),

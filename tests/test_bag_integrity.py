@@ -1,0 +1,293 @@
+"""Bags never lose data silently: the probes of the review (section 2), each as a regression test.
+
+Bags are made with independent writers (rosbags' Writer, the mcap library's Writer) from the example bag,
+then damaged: a message of a type this installation does not know (with and without its definition), a
+corrupt message, a file cut short (unchunked, and inside the first 1 MiB chunk, plain and zstd), a topic
+with another type.  Reading must deliver every message that is there, and say what it could not deliver.
+"""
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+from mcap.writer import CompressionType, Writer as McapWriter
+from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from moose.config import load_config
+from moose_ros.bag import BagError, BagReader, BagWriter, ReadReport, bag_info, export, read_bag, replan
+from moose_ros.graph import ACTUATOR_COMMAND
+from moose_ros.interfaces import typestore
+from moose_ros.runtime import DdsNode
+
+ROOT = Path(__file__).resolve().parents[1]
+EXTREME = ROOT / "bags" / "paper_v7_tau1.4_combined"
+with Reader(EXTREME) as _example:
+    TOTAL = _example.message_count
+"""Messages of the example bag (its metadata.yaml)."""
+PROBE_DEF = "float64 value\nstring note\nstd_msgs/Header header"
+MOOSE = [sys.executable, "-m", "moose.cli"]
+
+
+def lab_store():
+    store = get_typestore(Stores.ROS2_JAZZY)
+    store.register(dict(typestore().fielddefs))
+    store.register(get_types_from_msg(PROBE_DEF, "lab_msgs/msg/Probe"))
+    return store
+
+
+def with_extra(dst: Path, at: int, definition: bool = True, corrupt: bool = False) -> Path:
+    """The example bag rewritten by rosbags' Writer with, before message ``at``, one ``lab_msgs/msg/Probe`` on
+    /lab/probe (its definition embedded, or not) — or, with ``corrupt``, one undecodable /vehicle/imu message."""
+    store = lab_store()
+    with Reader(EXTREME) as reader, Writer(dst, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conns = {c.id: writer.add_connection(c.topic, c.msgtype, typestore=store) for c in reader.connections}
+        imu = next(conns[c.id] for c in reader.connections if c.topic == "/vehicle/imu")
+        probe = writer.add_connection("/lab/probe", "lab_msgs/msg/Probe", typestore=store) if definition else \
+            writer.add_connection("/lab/probe", "lab_msgs/msg/Probe", msgdef="", rihs01="RIHS01_" + "0" * 64)
+        Time, Header, Probe = (store.types[n] for n in ("builtin_interfaces/msg/Time", "std_msgs/msg/Header",
+                                                        "lab_msgs/msg/Probe"))
+        for i, (c, t, raw) in enumerate(reader.messages()):
+            if i == at:
+                if corrupt:
+                    writer.write(imu, t, b"\x00\x01\x00\x00\x07")  # a CDR header and 1 byte of a 60-byte message
+                else:
+                    writer.write(probe, t, store.serialize_cdr(Probe(1.5, "hi", Header(Time(0, 0), "x")),
+                                                                "lab_msgs/msg/Probe"))
+            writer.write(conns[c.id], t, raw)
+    return dst
+
+
+def chunked(dst: Path, compression: CompressionType = CompressionType.NONE) -> Path:
+    """The example bag as a chunked MCAP (1 MiB chunks, as ros2 bag record writes), with its metadata.yaml."""
+    dst.mkdir()
+    shutil.copy(EXTREME / "metadata.yaml", dst / "metadata.yaml")
+    source = next(EXTREME.glob("*.mcap"))
+    with open(source, "rb") as i, open(dst / source.name, "wb") as o:
+        writer = McapWriter(o, chunk_size=1024 * 1024, compression=compression)
+        writer.start(profile="ros2", library="test")
+        schemas: dict[int, int] = {}
+        channels: dict[int, int] = {}
+        for schema, channel, message in make_reader(i).iter_messages(log_time_order=False):
+            if schema.id not in schemas:
+                schemas[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
+            if channel.id not in channels:
+                channels[channel.id] = writer.register_channel(channel.topic, channel.message_encoding,
+                                                               schemas[schema.id], channel.metadata)
+            writer.add_message(channels[channel.id], message.log_time, message.data, message.publish_time,
+                               message.sequence)
+        writer.finish()
+    return dst
+
+
+def cut(bag: Path, size: int, metadata: bool = True) -> Path:
+    mcap = next(bag.glob("*.mcap"))
+    with open(mcap, "r+b") as handle:
+        handle.truncate(size)
+    if not metadata:
+        (bag / "metadata.yaml").unlink()
+    return bag
+
+
+def run(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    return subprocess.run(MOOSE + list(args), capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.mark.parametrize("metadata", [True, False])
+def test_a_type_unknown_here_is_decoded_from_the_bags_own_definition(tmp_path: Path, metadata: bool) -> None:
+    """The review: one such message cut info, export and play off at it (200 of 5555 messages, exit 0)."""
+    bag = with_extra(tmp_path / "bag", at=200)
+    if not metadata:
+        (bag / "metadata.yaml").unlink()
+    report = ReadReport(str(bag))
+    messages = list(read_bag(bag, report=report))
+    assert len(messages) == TOTAL + 1 and report.complete
+    assert report.registered == ["lab_msgs/msg/Probe"]
+    probe = next(m for m in messages if m.topic == "/lab/probe")
+    assert (probe.msg.value, probe.msg.note) == (1.5, "hi")
+    out = run("bag", "info", str(bag))
+    assert out.returncode == 0 and f"messages  {TOTAL + 1}" in out.stdout and out.stderr == ""
+    assert "decoded with the bag's own definition: lab_msgs/msg/Probe" in out.stdout
+    played = run("bag", "play", str(bag), "--rate", "100")  # every message it can send; the probe is reported
+    assert played.returncode == 1 and f"played {TOTAL} messages" in played.stdout, played.stderr
+    assert "1 message(s) on /lab/probe (lab_msgs/msg/Probe) skipped: not published" in played.stderr
+    files = export(bag, tmp_path / "csv")
+    assert len(files) == len(BagReader(EXTREME).topics) + 1 and (tmp_path / "csv" / "lab__probe.csv").read_text().count("\n") == 2
+
+
+@pytest.mark.parametrize("kind", ["no definition", "corrupt"])
+def test_an_undecodable_message_is_skipped_counted_and_reported_and_reading_goes_on(tmp_path: Path, kind: str) -> None:
+    bag = with_extra(tmp_path / "bag", at=200, definition=kind != "no definition", corrupt=kind == "corrupt")
+    report = ReadReport(str(bag))
+    messages = list(read_bag(bag, report=report))
+    assert len(messages) == TOTAL and messages[-1].timestamp_ns == 9_000_000_000  # to the end of the bag
+    topic = "/lab/probe" if kind == "no definition" else "/vehicle/imu"
+    assert report.skipped[topic]["count"] == 1 and not report.complete
+    reason = "holds no definition" if kind == "no definition" else "undecodable CDR"
+    assert reason in report.skipped[topic]["reason"]
+    out = run("bag", "info", str(bag))
+    assert out.returncode == 1 and f"messages  {TOTAL}" in out.stdout
+    assert f"moose: warning: bag '{bag}': 1 message(s) on {topic}" in out.stderr and reason in out.stderr
+
+
+def test_a_truncated_bag_reads_what_is_there_and_says_what_was_lost(tmp_path: Path) -> None:
+    """The review: a truncated bag with metadata.yaml read partially without a warning."""
+    bag = tmp_path / "bag"
+    shutil.copytree(EXTREME, bag)
+    size = next(bag.glob("*.mcap")).stat().st_size
+    cut(bag, int(size * 0.9))
+    report = ReadReport(str(bag))
+    delivered = len(list(read_bag(bag, report=report)))
+    assert 0 < delivered < TOTAL and sum(report.missing.values()) == TOTAL - delivered
+    assert 0 < report.lost_bytes < 1000  # the last, partial record
+    out = run("bag", "export", str(bag), "-o", str(tmp_path / "csv"))
+    assert out.returncode == 1 and f"{TOTAL - delivered} message(s) that metadata.yaml lists are missing" in out.stderr
+    assert len(list((tmp_path / "csv").glob("*.csv"))) == len(BagReader(EXTREME).topics)  # what is there, exported
+
+
+@pytest.mark.parametrize("compression", [CompressionType.NONE, CompressionType.ZSTD])
+@pytest.mark.parametrize("metadata", [True, False])
+def test_a_bag_cut_inside_its_first_chunk_still_gives_the_complete_messages(tmp_path: Path, metadata: bool,
+                                                                           compression: CompressionType) -> None:
+    """The review: cut at 700 KB, a chunked bag (first chunk 1 MiB) gave an empty error and nothing."""
+    bag = chunked(tmp_path / "bag", compression)
+    with open(next(bag.glob("*.mcap")), "rb") as handle:
+        first = make_reader(handle).get_summary().chunk_indexes[0]
+    assert first.uncompressed_size > 1_000_000  # a 1 MiB chunk
+    cut(bag, first.chunk_start_offset + int(0.6 * first.chunk_length), metadata)
+    report = ReadReport(str(bag))
+    messages = list(read_bag(bag, report=report))
+    original = list(read_bag(EXTREME))
+    assert len(messages) > 1000 and not report.complete
+    assert [(m.topic, m.timestamp_ns) for m in messages] == [(m.topic, m.timestamp_ns) for m in original[:len(messages)]]
+    if metadata:
+        assert sum(report.missing.values()) == TOTAL - len(messages)
+    assert report.lost_bytes > 0
+
+
+def corrupt_first_chunk(bag: Path, record: int = 100) -> int:
+    """Give the ``record``-th record inside the first chunk a length far beyond the chunk (its checksum then fails);
+    returns the chunk's offset in the file."""
+    import struct
+
+    mcap = next(bag.glob("*.mcap"))
+    with open(mcap, "rb") as handle:
+        first = make_reader(handle).get_summary().chunk_indexes[0]
+    data = bytearray(mcap.read_bytes())
+    head = first.chunk_start_offset + 1 + 8 + 8 + 8 + 8 + 4
+    (name_length,) = struct.unpack_from("<I", data, head)
+    position = head + 4 + name_length + 8
+    for _ in range(record):
+        position += 9 + struct.unpack_from("<Q", data, position + 1)[0]
+    struct.pack_into("<Q", data, position + 1, 2**40)
+    mcap.write_bytes(bytes(data))
+    return first.chunk_start_offset
+
+
+@pytest.mark.parametrize("metadata", [True, False])
+def test_a_corrupt_chunk_is_reported_and_reading_goes_on_after_it(tmp_path: Path, metadata: bool) -> None:
+    bag = chunked(tmp_path / "bag")
+    offset = corrupt_first_chunk(bag)
+    if not metadata:
+        (bag / "metadata.yaml").unlink()
+    report = ReadReport(str(bag))
+    messages = list(read_bag(bag, report=report))
+    original = [(m.topic, m.timestamp_ns) for m in read_bag(EXTREME)]
+    got = [(m.topic, m.timestamp_ns) for m in messages]
+    assert got[-1] == original[-1] and set(got) < set(original)  # past the corrupt chunk, to the end of the bag
+    assert report.suspect == [f"chunk at byte {offset}"] and report.lost_bytes > 500_000
+    assert sum(report.missing.values()) == (TOTAL - len(messages) if metadata else 0)
+    out = run("bag", "info", str(bag))
+    assert out.returncode == 1 and "fails its checksum" in out.stderr and "byte(s) of records are unreadable" in out.stderr
+
+
+def test_damaged_files_give_errors_that_say_why(tmp_path: Path) -> None:
+    bag = cut(chunked(tmp_path / "bag"), 200, metadata=False)  # inside the first chunk's header
+    with pytest.raises(BagError, match=r"truncated before its first complete chunk or channel: \d+ of 200 bytes"):
+        list(read_bag(bag))
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    (empty / "x.mcap").write_bytes(b"")
+    with pytest.raises(BagError, match=r"not a readable MCAP file \(0 bytes"):
+        list(read_bag(empty))
+
+
+def test_a_topic_filter_naming_a_missing_topic_is_an_error_listing_the_bags_topics(tmp_path: Path) -> None:
+    """The review: ``export --topics /nope`` exported every topic; ``play --topics /vehicle/imuu`` published every
+    topic (recorded actuator commands included) into the live graph."""
+    out = run("bag", "export", str(EXTREME), "-o", str(tmp_path / "csv"), "--topics", "/nope")
+    assert out.returncode == 2 and "moose: error: topic '/nope' is not in bag" in out.stderr
+    assert "/vehicle/imu, /vehicle/odom" in out.stderr and not list(tmp_path.glob("csv/*"))
+    listener = DdsNode("play_victim")
+    received: list = []
+    ACTUATOR_COMMAND.subscription(listener, received.append)
+    received_imu: list = []
+    listener.subscription("sensor_msgs/msg/Imu", "/vehicle/imu", received_imu.append)
+    try:
+        play = subprocess.Popen(MOOSE + ["bag", "play", str(EXTREME), "--topics", "/vehicle/imuu", "--rate", "10"],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 60
+        while play.poll() is None and time.monotonic() < deadline:
+            listener.spin_once(0.05)
+        listener.spin_once(0.5)
+        _, err = play.communicate(timeout=10)
+    finally:
+        listener.shutdown()
+    assert play.returncode == 2 and "moose: error: topic '/vehicle/imuu' is not in bag" in err
+    assert received == [] and received_imu == []
+    with pytest.raises(BagError, match="is not in bag"):
+        list(read_bag(EXTREME, ["/perception/state", "/nope"]))
+    assert BagReader(EXTREME).topics["/vehicle/imu"] == "sensor_msgs/msg/Imu"
+
+
+def wrong_state_type(path: Path) -> Path:
+    """A bag whose /perception/state carries nav_msgs/msg/Odometry."""
+    writer = BagWriter(path)
+    odom = typestore().types["nav_msgs/msg/Odometry"]
+    for k, msg in enumerate(read_bag(EXTREME, ["/vehicle/odom", "/planning/blend"])):
+        topic = "/perception/state" if msg.topic == "/vehicle/odom" else msg.topic
+        assert msg.topic != "/vehicle/odom" or isinstance(msg.msg, odom)
+        writer.write(topic, msg.type_name, msg.timestamp_ns, typestore().serialize_cdr(msg.msg, msg.type_name))
+    writer.close()
+    return path
+
+
+def test_replan_on_a_bag_whose_state_topic_has_another_type_is_a_clear_error(tmp_path: Path) -> None:
+    bag = wrong_state_type(tmp_path / "bag")
+    with pytest.raises(BagError, match=r"topic '/perception/state' of bag .* carries 'nav_msgs/msg/Odometry', "
+                                       r"not 'moose_msgs/msg/StateEstimate'"):
+        replan(bag, load_config(None))
+    out = run("bag", "replan", str(bag))
+    assert out.returncode == 2 and "moose: error: topic '/perception/state'" in out.stderr and "Traceback" not in out.stderr
+    out = run("bag", "play", str(bag), "--rate", "100")  # nor is it published into the graph under that name
+    assert out.returncode == 2 and "carries 'nav_msgs/msg/Odometry'" in out.stderr
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["export", str(EXTREME), "-o", "{file}"], "is not a directory"),
+    (["replan", str(EXTREME), "--plot", "{file}/x.png"], "--plot '{file}/x.png' cannot be written"),
+    (["replan", str(EXTREME), "--plot", "{tmp}/figure.xyz"], "expected a file ending in one of"),
+])
+def test_bad_output_paths_of_the_bag_tools_are_errors_before_any_work(tmp_path: Path, args: list[str],
+                                                                     message: str) -> None:
+    file = tmp_path / "a_file"
+    file.write_text("x")
+    fill = {"file": str(file), "tmp": str(tmp_path)}
+    start = time.monotonic()
+    out = run("bag", *[a.format(**fill) for a in args])
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    assert "moose: error: " in out.stderr and message.format(**fill) in out.stderr
+    assert time.monotonic() - start < 30  # refused before the re-planning (tens of seconds) ran
+
+
+def test_the_example_bags_read_completely() -> None:
+    for bag in (EXTREME, ROOT / "bags" / "paper_v5_tau3_combined"):
+        report = ReadReport(str(bag))
+        info = bag_info(bag, report)
+        assert report.complete and info["losses"] == [] and info["messages"] == report.delivered
+        assert report.recovered == ""

@@ -1,0 +1,167 @@
+"""Bad input gets ``moose: error:`` and exit status 2, never a traceback; outputs are checked before a run; the exit
+status of ``moose simulate`` is its verdict.  The probes of the review's section 1 (CLI input, scenario files,
+output paths, non-finite values), each as a regression test, run as a user would: the ``moose`` command in a
+child process.
+"""
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from moose.cli.common import EXIT_BAD_INPUT, EXIT_CLEAR, EXIT_FAILED, EXIT_INCOMPLETE, OUTCOME_EXIT, outcome_exit_status
+from moose.resources import SCENARIO_DIR
+from moose.verdict import OUTCOMES
+
+MOOSE = [sys.executable, "-m", "moose.cli"]
+SHORT = ["--duration", "0.5", "--no-bag"]
+
+
+def moose(*args: str, cwd: Path | None = None, timeout: float = 300) -> subprocess.CompletedProcess:
+    return subprocess.run(MOOSE + list(args), capture_output=True, text=True, timeout=timeout, cwd=cwd)
+
+
+def refused(out: subprocess.CompletedProcess, *needles: str) -> None:
+    """Exit status 2, ``moose: error:`` or argparse's error naming the problem, no traceback, nothing run."""
+    assert out.returncode == EXIT_BAD_INPUT, (out.returncode, out.stdout[-500:], out.stderr[-2000:])
+    assert "Traceback" not in out.stderr and "error:" in out.stderr
+    assert "scenario        " not in out.stdout  # the summary: printed only after a run
+    for needle in needles:
+        assert needle in out.stderr, out.stderr
+
+
+def strict_json(path: Path) -> dict:
+    """JSON as the standard defines it: NaN and Infinity are not JSON."""
+    def refuse(constant: str) -> None:
+        raise ValueError(f"{constant} is not JSON")
+
+    return json.loads(path.read_text(), parse_constant=refuse)
+
+
+def test_a_negative_seed_is_refused() -> None:
+    refused(moose("simulate", "--seed", "-1", *SHORT), "--seed", "'-1' must be a non-negative integer")
+
+
+@pytest.mark.parametrize("field", ["name", "v_init", "v_des", "tau", "obstacle"])
+def test_a_scenario_file_missing_a_required_field_is_refused(tmp_path: Path, field: str) -> None:
+    text = (SCENARIO_DIR / "paper_v7_tau1.4.yaml").read_text()
+    kept = [line for line in text.splitlines() if not line.startswith(f"{field}:")]
+    assert len(kept) == len(text.splitlines()) - 1
+    scenario = tmp_path / "partial.yaml"
+    scenario.write_text("\n".join(kept) + "\n")
+    refused(moose("simulate", "--scenario", str(scenario), *SHORT), f"partial.{field} is missing: a required field")
+
+
+@pytest.mark.parametrize("value", ["inf", "-inf", "nan", "1e400"])
+@pytest.mark.parametrize("flag", ["--obstacle-half-width", "--tau", "--speed", "--duration", "--mu"])
+def test_non_finite_numbers_are_refused_at_the_command_line(flag: str, value: str) -> None:
+    args = {"--speed": "7", "--tau": "1.4", "--obstacle-half-width": "1"}
+    args[flag] = value
+    out = moose("simulate", *[f"{k}={v}" for k, v in args.items()], "--no-bag")
+    refused(out, flag, f"'{value}' must be a finite positive number")
+
+
+@pytest.mark.parametrize("adhoc", [["--speed", "7", "--tau", "0.001", "--obstacle-half-width", "1"],
+                                   ["--speed", "1e-6", "--tau", "1", "--obstacle-half-width", "1"]])
+def test_degenerate_tests_write_valid_json(tmp_path: Path, adhoc: list[str]) -> None:
+    """The review: ``--tau 0.001`` and ``--speed 1e-6`` wrote Infinity into the JSON."""
+    out = moose("simulate", *adhoc, "--no-bag", "--json", str(tmp_path / "s.json"))
+    summary = strict_json(tmp_path / "s.json")
+    assert out.returncode == outcome_exit_status(summary["outcome"])
+    assert summary["notes"]  # what is not a number says why
+
+
+def bad_paths(tmp: Path) -> list[tuple[str, str, str]]:
+    """(flag, path, what the error says) — unwritable or invalid outputs."""
+    a_file = tmp / "a_file"
+    a_file.write_text("x")
+    a_dir = tmp / "a_dir"
+    a_dir.mkdir(exist_ok=True)
+    long = str(tmp / ("x" * 300 + ".json"))
+    return [
+        ("--json", str(a_dir), "is a directory"),
+        ("--json", str(a_file / "s.json"), "cannot be written"),
+        ("--json", "/proc/moose-summary.json", "cannot be written"),
+        ("--json", "", "expected a file path"),
+        ("--json", long, "cannot be written"),
+        ("--plot", str(a_dir / "fig.xyz"), "expected a file ending in one of"),
+        ("--plot", str(a_file / "fig.png"), "cannot be written"),
+        ("--plot", "/proc/moose-figure.png", "cannot be written"),
+        ("--bag", str(a_dir), "exists already"),
+        ("--bag", str(a_file / "bag"), "cannot be created"),
+        ("--bag", "/proc/moose-bag", "cannot be created"),
+    ]
+
+
+@pytest.mark.parametrize("case", range(11))
+def test_unusable_output_paths_are_refused_before_the_run(tmp_path: Path, case: int) -> None:
+    """The review: every unwritable --json/--plot/--bag path was a traceback after the run, and the bag and the
+    other outputs were lost with it."""
+    flag, path, what = bad_paths(tmp_path)[case]
+    args = ["simulate", "--duration", "0.5", flag, path] + (["--no-bag"] if flag != "--bag" else [])
+    refused(moose(*args), f"moose: error: {flag} {path!r}", what)
+
+
+@pytest.mark.graph
+def test_launch_checks_its_outputs_before_any_node_starts(tmp_path: Path) -> None:
+    for flag, path, what in [bad_paths(tmp_path)[i] for i in (0, 2, 8)]:
+        start = time.monotonic()
+        out = moose("launch", flag, path, *(["--no-bag"] if flag != "--bag" else []))
+        refused(out, f"moose: error: {flag} {path!r}", what)
+        assert "[observer]" not in out.stdout and time.monotonic() - start < 30
+
+
+def test_every_outcome_has_an_exit_status() -> None:
+    assert set(OUTCOME_EXIT) == set(OUTCOMES)
+    assert outcome_exit_status("clear") == EXIT_CLEAR and outcome_exit_status("incomplete") == EXIT_INCOMPLETE
+    assert {outcome_exit_status(o) for o in OUTCOMES if o not in ("clear", "incomplete")} == {EXIT_FAILED}
+    assert len({EXIT_CLEAR, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INCOMPLETE}) == 4
+
+
+@pytest.mark.slow
+def test_simulate_prints_its_verdict_and_exits_with_it(tmp_path: Path) -> None:
+    """The main job (``make run``) is clear: 0, and every output written; a collision: 1.  What is printed and the
+    exit status agree with the JSON (the verdict's own record)."""
+    main = moose("simulate", "--scenario", "paper_v7_tau1.4", "--json", str(tmp_path / "main" / "summary.json"),
+                 "--plot", str(tmp_path / "main" / "figure.png"), "--bag", str(tmp_path / "main" / "bag"))
+    summary = strict_json(tmp_path / "main" / "summary.json")
+    assert main.returncode == 0 and summary["outcome"] == "clear", main.stderr
+    assert f"outcome         CLEAR: {summary['reason']}" in main.stdout and "collision-free" not in main.stdout
+    assert (tmp_path / "main" / "figure.png").stat().st_size > 0 and (tmp_path / "main" / "bag" / "metadata.yaml").is_file()
+    hit = moose("simulate", "--speed", "7", "--tau", "0.3", "--obstacle-half-width", "2", "--no-bag",
+                "--json", str(tmp_path / "hit.json"))
+    summary = strict_json(tmp_path / "hit.json")
+    assert summary["outcome"] == "collision" and hit.returncode == EXIT_FAILED
+    assert f"outcome         COLLISION: {summary['reason']}" in hit.stdout
+
+
+def test_ctrl_c_ends_simulate_with_130(tmp_path: Path) -> None:
+    # as from a terminal: SIGINT at its default (a parent started in the background may pass it on ignored)
+    proc = subprocess.Popen(MOOSE + ["simulate", "--duration", "120", "--no-bag", "--json", str(tmp_path / "s.json")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        time.sleep(1.5)  # while starting or running (121 simulated seconds take several seconds)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130 and "Traceback" not in err
+    assert not (tmp_path / "s.json").exists()  # nothing claims to be the summary of an interrupted run
+
+
+def test_a_closed_pipe_is_not_a_traceback() -> None:
+    """``moose … | head``: the reader goes away before the output comes; the command ends quietly (128 + SIGPIPE)."""
+    bag = Path(__file__).resolve().parents[1] / "bags" / "paper_v7_tau1.4_combined"
+    proc = subprocess.Popen(MOOSE + ["bag", "info", str(bag)], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert proc.stdout is not None
+    proc.stdout.close()
+    _, err = proc.communicate(timeout=120)
+    assert b"Traceback" not in err and b"Exception ignored" not in err and proc.returncode == 128 + signal.SIGPIPE

@@ -1,0 +1,116 @@
+"""DDS discovery settings: ROS 2's variables mapped to Cyclone DDS as rmw_cyclonedds maps them, confined by default.
+
+The behaviour on the network is tested from a second network namespace in tests/test_network_confinement.py;
+these tests pin the mapping itself (rmw_cyclonedds' check_create_domain, Jazzy) and the error messages.
+"""
+from __future__ import annotations
+
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+from isolation import claim_domain
+from moose.params import ParamError
+from moose_ros.runtime.discovery import Discovery, names_interface
+
+LO_XML = '<CycloneDDS><Domain><General><Interfaces><NetworkInterface name="lo"/></Interfaces></General></Domain></CycloneDDS>'
+
+
+def parts(config: str) -> list[ET.Element]:
+    return [ET.fromstring(p) for p in config.split(",") if p]
+
+
+def test_unset_means_this_host_bound_to_loopback() -> None:
+    d = Discovery.from_environ({})
+    assert d.range == "LOCALHOST" and d.loopback_only
+    root = parts(d.cyclone_config())[0]
+    assert [e.get("address") for e in root.iter("NetworkInterface")] == ["127.0.0.1"]
+    assert root.findtext("Domain/General/AllowMulticast") == "false"
+    assert [p.get("address") for p in root.iter("Peer")] == ["127.0.0.1"]
+    assert root.findtext("Domain/Discovery/ParticipantIndex") == "auto"
+    assert root.findtext("Domain/Discovery/MaxAutoParticipantIndex") == "32"
+    assert Discovery.from_environ({"ROS_AUTOMATIC_DISCOVERY_RANGE": ""}).range == "LOCALHOST"
+
+
+def test_each_range_maps_like_rmw_cyclonedds() -> None:
+    subnet = Discovery.from_environ({"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET", "ROS_STATIC_PEERS": "10.0.0.7;car2.lan"})
+    root = parts(subnet.cyclone_config())[0]
+    assert list(root.iter("NetworkInterface")) == [] and root.find("Domain/General") is None  # multicast, any interface
+    assert [p.get("address") for p in root.iter("Peer")] == ["10.0.0.7", "car2.lan"]
+    assert root.findtext("Domain/Discovery/ParticipantIndex") == "auto"
+    off = Discovery.from_environ({"ROS_AUTOMATIC_DISCOVERY_RANGE": "OFF", "ROS_STATIC_PEERS": "10.0.0.7"})
+    root = parts(off.cyclone_config(pid=4242))[0]
+    assert root.findtext("Domain/Discovery/Tag") == "ros_discovery_off_4242" and list(root.iter("Peer")) == []
+    assert root.findtext("Domain/Discovery/ParticipantIndex") == "none" and off.ignored_peers == ("10.0.0.7",)
+    system = Discovery.from_environ({"ROS_AUTOMATIC_DISCOVERY_RANGE": "SYSTEM_DEFAULT", "ROS_STATIC_PEERS": "h"})
+    assert system.cyclone_config() is None and system.ignored_peers == ("h",)
+    # LOCALHOST with static peers: localhost and the peers, multicast off; no loopback binding (the peers are elsewhere)
+    peers = Discovery.from_environ({"ROS_STATIC_PEERS": " 10.0.0.7 ; ;fd00::2"})
+    root = parts(peers.cyclone_config())[0]
+    assert [p.get("address") for p in root.iter("Peer")] == ["127.0.0.1", "10.0.0.7", "fd00::2"]
+    assert not peers.loopback_only and list(root.iter("NetworkInterface")) == []
+
+
+def test_deprecated_localhost_only_prevails_and_drops_the_peers() -> None:
+    d = Discovery.from_environ({"ROS_LOCALHOST_ONLY": "1", "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET",
+                                "ROS_STATIC_PEERS": "10.0.0.7"})
+    assert d.range == "LOCALHOST" and d.static_peers == () and d.loopback_only and d.ignored_peers == ("10.0.0.7",)
+    assert Discovery.from_environ({"ROS_LOCALHOST_ONLY": "0", "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}).range == "SUBNET"
+
+
+@pytest.mark.parametrize(("env", "match"), [
+    ({"ROS_AUTOMATIC_DISCOVERY_RANGE": "subnet"}, "ROS_AUTOMATIC_DISCOVERY_RANGE = 'subnet' is invalid"),
+    ({"ROS_AUTOMATIC_DISCOVERY_RANGE": "ALL"}, "expected one of LOCALHOST, SUBNET, SYSTEM_DEFAULT, OFF"),
+    ({"ROS_STATIC_PEERS": '10.0.0.7"/><Peer address="evil'}, "ROS_STATIC_PEERS: .* is invalid"),
+    ({"ROS_LOCALHOST_ONLY": "yes"}, "ROS_LOCALHOST_ONLY = 'yes' is invalid"),
+])
+def test_bad_values_are_refused_with_the_variable_named(env: dict, match: str) -> None:
+    with pytest.raises(ParamError, match=match):
+        Discovery.from_environ(env)
+
+
+def test_the_users_uri_comes_last_and_its_interfaces_replace_the_loopback_binding(tmp_path: Path) -> None:
+    tracing = "<CycloneDDS><Domain><Tracing><Verbosity>config</Verbosity></Tracing></Domain></CycloneDDS>"
+    d = Discovery.from_environ({"CYCLONEDDS_URI": tracing})
+    assert d.loopback_only and d.cyclone_config().endswith("," + tracing)  # read after the range: it wins
+    inline = Discovery.from_environ({"CYCLONEDDS_URI": LO_XML})
+    assert not inline.loopback_only and inline.cyclone_config().count("NetworkInterface") == 1
+    file = tmp_path / "dds.xml"
+    file.write_text(LO_XML)
+    assert names_interface(file.as_uri()) and names_interface(str(file))
+    assert names_interface("file:///nonexistent/dds.xml")  # unreadable: never add a second interface to it
+    assert not names_interface(tracing) and not names_interface("")
+    assert "names network interfaces" in Discovery.from_environ({"CYCLONEDDS_URI": file.as_uri()}).describe()
+
+
+def test_ros_environment_gives_ros2_tools_the_same_settings() -> None:
+    env = Discovery.from_environ({}).ros_environment()
+    assert env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST" and "127.0.0.1" in env["CYCLONEDDS_URI"]
+    again = Discovery.from_environ(env)  # idempotent: the binding is not added twice
+    assert "CYCLONEDDS_URI" not in again.ros_environment() and not again.loopback_only  # left as it is
+    assert again.cyclone_config().count("NetworkInterface") == 1
+    subnet = Discovery.from_environ({"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}).ros_environment()
+    assert subnet == {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}
+    out = subprocess.run([sys.executable, "-m", "moose_ros.runtime"], capture_output=True, text=True, timeout=60,
+                         env={"PATH": "/usr/bin:/bin"})
+    assert out.returncode == 0 and out.stderr == ""
+    assert out.stdout.splitlines()[0] == "export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST"
+
+
+def test_the_generated_configuration_is_accepted_by_cyclone_dds() -> None:
+    """Every range's configuration creates a domain (in a child process, in domains of this test run's own)."""
+    domains = [claim_domain() for _ in range(4)]
+    script = ("import sys\nfrom cyclonedds.domain import Domain, DomainParticipant\n"
+              "from moose_ros.runtime.discovery import Discovery\n"
+              "ids = [int(a) for a in sys.argv[1:]]\n"
+              "for i, r in enumerate(['LOCALHOST', 'SUBNET', 'OFF']):\n"
+              "    d = Discovery.from_environ({'ROS_AUTOMATIC_DISCOVERY_RANGE': r, 'ROS_STATIC_PEERS': '127.0.0.2'})\n"
+              "    Domain(ids[i], d.cyclone_config()); DomainParticipant(ids[i])\n"
+              "Domain(ids[3], Discovery.from_environ({}).cyclone_config()); DomainParticipant(ids[3])\n"
+              "print('ok')\n")
+    out = subprocess.run([sys.executable, "-c", script, *map(str, domains)], capture_output=True, text=True,
+                         timeout=60)
+    assert out.stdout.strip() == "ok", out.stderr

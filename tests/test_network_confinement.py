@@ -1,0 +1,269 @@
+"""The graph is confined to its host by default, tested from outside: a second network namespace stands in for
+another host on the same network.
+
+Two network namespaces joined by a veth pair (created here and removed afterwards, also on failure).  In
+namespace A, ``moose node can_bridge`` runs with its defaults (no ROS_DOMAIN_ID, no CYCLONEDDS_URI, no
+discovery variables: domain 0 of that namespace), and a listener decodes the command frames it puts on the
+``udp_multicast`` bus with cantools and the DBC.  From namespace B, plain Cyclone DDS participants (the wire
+format of a ROS 2 node: ``rt/`` topic, ``pkg::msg::dds_::Type_``, XCDR1) publish 0.3 rad of steering and
+200 N·m per motor on ``/control/actuator_command`` — with Cyclone's defaults (multicast discovery), and
+with namespace A's address as a unicast peer (an attacker who knows the car computer's address).  Neither
+may match the bridge, and no commanded steering may reach the bus; a publisher in namespace A on the
+runtime's defaults then does both (the bridge was reachable from its own host all along).  With
+``ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET`` (the opt-in) the publisher from B does reach the bus, and so does
+one on a host named in ``ROS_STATIC_PEERS``, so the test can fail.
+"""
+from __future__ import annotations
+
+import json
+import os
+import queue
+import secrets
+import shutil
+import signal
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+from typing import Iterator, Optional
+
+import pytest
+
+pytestmark = [pytest.mark.graph, pytest.mark.can, pytest.mark.slow]
+
+DDS_VARIABLES = ("ROS_DOMAIN_ID", "CYCLONEDDS_URI", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_STATIC_PEERS",
+                 "ROS_LOCALHOST_ONLY")
+"""What the test run sets for its own isolation (tests/conftest.py); removed so the bridge runs on its defaults."""
+ATTACK_S = 4.0
+"""How long each publisher sends (s): Cyclone DDS discovery on a quiet link takes well under a second."""
+START_TIMEOUT = 60.0
+
+PUBLISHER = textwrap.dedent("""
+    import json, sys, time
+    mode, config, duration = sys.argv[1], sys.argv[2], float(sys.argv[3])
+    steer, torque = 0.3, 200.0
+    if mode == "runtime":  # our runtime on its defaults
+        from moose_ros.graph import ACTUATOR_COMMAND
+        from moose_ros.runtime import create_node
+        node = create_node("intruder")
+        pub = ACTUATOR_COMMAND.publisher(node)
+        make = lambda: node.make(ACTUATOR_COMMAND.type, steering_angle=steer, torque_rl=torque, torque_rr=torque)
+        write, matched = pub, pub.subscription_count
+    else:  # a plain Cyclone DDS participant speaking ROS 2's wire format
+        from cyclonedds.core import Policy, Qos
+        from cyclonedds.domain import Domain, DomainParticipant
+        from cyclonedds.pub import DataWriter
+        from cyclonedds.topic import Topic
+        from moose_ros.interfaces import message_class
+        domain = Domain(0, config) if config else None
+        participant = DomainParticipant(0)
+        cls = message_class("moose_msgs/msg/ActuatorCommand")
+        qos = Qos(Policy.Reliability.Reliable(10**8), Policy.History.KeepLast(10),
+                  Policy.DataRepresentation(use_cdrv0_representation=True))
+        writer = DataWriter(participant, Topic(participant, "rt/control/actuator_command", cls), qos=qos)
+        make = lambda: cls(steering_angle=steer, torque_rl=torque, torque_rr=torque)
+        write, matched = writer.write, lambda: len(writer.get_matched_subscriptions())
+    start, best, first = time.monotonic(), 0, None
+    while time.monotonic() - start < duration:
+        msg = make()
+        now = time.time()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = int(now), int((now % 1) * 1e9)
+        write(msg)
+        count = matched()
+        if count and first is None:
+            first = time.monotonic() - start
+        best = max(best, count)
+        time.sleep(0.01)
+    print(json.dumps({"matched": best, "first_match_s": first}), flush=True)
+""")
+
+LISTENER = textwrap.dedent("""
+    import json, sys, time
+    from moose.canbus.bus import DEFAULT_GROUP, DEFAULT_PORT, open_bus
+    from moose.canbus.codec import default_database
+    db, duration = default_database(), float(sys.argv[1])
+    bus = open_bus("udp_multicast", DEFAULT_GROUP, DEFAULT_PORT)
+    print("ready", flush=True)
+    frames, steer, torque, start = 0, 0.0, 0.0, time.monotonic()
+    while time.monotonic() - start < duration:
+        frame = bus.recv(timeout=0.05)
+        if frame is None or frame.arbitration_id not in (0x100, 0x101):
+            continue
+        frames += 1
+        values = db.decode_message(frame.arbitration_id, bytes(frame.data))
+        steer = max(steer, abs(values.get("SteerAngleCmd", 0.0)))
+        torque = max(torque, abs(values.get("TorqueRL", 0.0)), abs(values.get("TorqueRR", 0.0)))
+    bus.shutdown()
+    print(json.dumps({"command_frames": frames, "max_steer": steer, "max_torque": torque}), flush=True)
+""")
+
+
+def _ip(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(["ip", *args], capture_output=True, text=True, timeout=15)
+
+
+class Hosts:
+    """Two network namespaces ``a`` and ``b`` joined by a veth pair (10.231.x.1 in a, .2 in b)."""
+
+    def __init__(self) -> None:
+        tag = f"{os.getpid() % 100000}{secrets.token_hex(2)}"
+        self.a, self.b = f"moose-{tag}-a", f"moose-{tag}-b"
+        self.veth = (f"mv{tag}a", f"mv{tag}b")
+        subnet = f"10.231.{secrets.randbelow(250) + 1}"
+        self.addr_a, self.addr_b = f"{subnet}.1", f"{subnet}.2"
+        self.procs: list[subprocess.Popen] = []
+
+    def create(self) -> None:
+        made = _ip("netns", "add", self.a)
+        if made.returncode != 0:
+            pytest.skip(f"cannot create a network namespace (needs CAP_SYS_ADMIN/CAP_NET_ADMIN): {made.stderr.strip()}")
+        steps = [("netns", "add", self.b),
+                 ("link", "add", self.veth[0], "type", "veth", "peer", "name", self.veth[1]),
+                 ("link", "set", self.veth[0], "netns", self.a), ("link", "set", self.veth[1], "netns", self.b),
+                 ("-n", self.a, "addr", "add", f"{self.addr_a}/24", "dev", self.veth[0]),
+                 ("-n", self.b, "addr", "add", f"{self.addr_b}/24", "dev", self.veth[1])]
+        steps += [("-n", ns, "link", "set", dev, "up") for ns in (self.a, self.b) for dev in ("lo",)]
+        steps += [("-n", self.a, "link", "set", self.veth[0], "up"), ("-n", self.b, "link", "set", self.veth[1], "up")]
+        for step in steps:
+            done = _ip(*step)
+            assert done.returncode == 0, f"ip {' '.join(step)}: {done.stderr.strip()}"
+
+    def remove(self) -> None:
+        for proc in self.procs:
+            stop(proc)
+        _ip("link", "del", self.veth[0])  # only if it never moved into a namespace
+        for ns in (self.a, self.b):
+            _ip("netns", "del", ns)
+
+    def spawn(self, ns: str, args: list[str], env_extra: Optional[dict[str, str]] = None) -> subprocess.Popen:
+        env = {k: v for k, v in os.environ.items() if k not in DDS_VARIABLES}
+        env.update(env_extra or {})
+        proc = subprocess.Popen(["ip", "netns", "exec", ns, *args], env=env, stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT, text=True, start_new_session=True)
+        self.procs.append(proc)
+        return proc
+
+
+def stop(proc: subprocess.Popen) -> None:
+    if proc.poll() is None:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    try:
+        proc.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        pass
+
+
+@pytest.fixture(scope="module")
+def hosts() -> Iterator[Hosts]:
+    if shutil.which("ip") is None:
+        pytest.skip("no `ip` command (iproute2): cannot create network namespaces")
+    pair = Hosts()
+    try:
+        pair.create()
+        yield pair
+    finally:
+        pair.remove()
+    listed = _ip("netns", "list").stdout
+    assert pair.a not in listed and pair.b not in listed, "a namespace of the test survived it"
+
+
+class Lines:
+    """The output lines of a process, read by a thread (so waiting for one is bounded in time)."""
+
+    def __init__(self, proc: subprocess.Popen) -> None:
+        self.proc, self.lines, self.queue = proc, [], queue.Queue()
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            self.lines.append(line)
+            self.queue.put(line)
+        self.queue.put(None)
+
+    def wait_for(self, text: str, timeout: float) -> None:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            try:
+                line = self.queue.get(timeout=max(0.0, deadline - time.monotonic()))
+            except queue.Empty:
+                break
+            if line is None:
+                break
+            if text in line:
+                return
+        raise AssertionError(f"no {text!r} within {timeout} s; output:\n{''.join(self.lines)}")
+
+    def result(self, timeout: float) -> dict:
+        try:
+            self.proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            stop(self.proc)
+        time.sleep(0.1)
+        for line in reversed(self.lines):
+            if line.startswith("{"):
+                return json.loads(line)
+        raise AssertionError(f"no result; output:\n{''.join(self.lines)}")
+
+
+def start_bridge(hosts: Hosts, env: Optional[dict[str, str]] = None) -> Lines:
+    bridge = Lines(hosts.spawn(hosts.a, [sys.executable, "-m", "moose.cli", "node", "can_bridge"], env))
+    bridge.wait_for("can_bridge started", START_TIMEOUT)
+    return bridge
+
+
+def attack(hosts: Hosts, ns: str, mode: str, config: str = "", env: Optional[dict[str, str]] = None) -> Lines:
+    return Lines(hosts.spawn(ns, [sys.executable, "-c", PUBLISHER, mode, config, str(ATTACK_S)], env))
+
+
+def listen(hosts: Hosts) -> Lines:
+    listener = Lines(hosts.spawn(hosts.a, [sys.executable, "-c", LISTENER, str(ATTACK_S + 4.0)]))
+    listener.wait_for("ready", START_TIMEOUT)
+    return listener
+
+
+def unicast_peer(address: str) -> str:
+    return (f'<CycloneDDS><Domain><Discovery><Peers><Peer address="{address}"/></Peers>'
+            "<ParticipantIndex>auto</ParticipantIndex></Discovery></Domain></CycloneDDS>")
+
+
+def test_the_bridge_on_its_defaults_cannot_be_reached_from_another_host(hosts: Hosts) -> None:
+    bridge = start_bridge(hosts)
+    try:
+        bus = listen(hosts)
+        remote = [attack(hosts, hosts.b, "plain"), attack(hosts, hosts.b, "plain", unicast_peer(hosts.addr_a))]
+        results = [r.result(ATTACK_S + 30) for r in remote]
+        frames = bus.result(ATTACK_S + 30)
+        assert [r["matched"] for r in results] == [0, 0], results  # neither multicast nor unicast discovery
+        assert frames["command_frames"] > 100 and frames["max_steer"] == 0.0 and frames["max_torque"] == 0.0, frames
+        # the same commands from the bridge's own host, on the runtime's defaults, do reach the bus
+        bus = listen(hosts)
+        local = attack(hosts, hosts.a, "runtime").result(ATTACK_S + 30)
+        frames = bus.result(ATTACK_S + 30)
+        assert local["matched"] >= 1, local
+        assert frames["max_steer"] == pytest.approx(0.3, abs=1e-3) and frames["max_torque"] > 100.0, frames
+    finally:
+        stop(bridge.proc)
+    assert "DDS discovery LOCALHOST: this host only, bound to loopback" in "".join(bridge.lines)
+
+
+@pytest.mark.parametrize("opt_in", ["subnet", "static_peer"])
+def test_the_opt_in_reaches_the_bridge_from_another_host(hosts: Hosts, opt_in: str) -> None:
+    """``SUBNET``: multicast discovery on the link; ``ROS_STATIC_PEERS``: the named host only (unicast)."""
+    if opt_in == "subnet":
+        env, config = {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}, ""
+    else:
+        env, config = {"ROS_STATIC_PEERS": hosts.addr_b}, unicast_peer(hosts.addr_a)
+    bridge = start_bridge(hosts, env)
+    try:
+        bus = listen(hosts)
+        remote = attack(hosts, hosts.b, "plain", config).result(ATTACK_S + 30)
+        frames = bus.result(ATTACK_S + 30)
+    finally:
+        stop(bridge.proc)
+    assert remote["matched"] >= 1, remote
+    assert frames["max_steer"] == pytest.approx(0.3, abs=1e-3) and frames["max_torque"] > 100.0, frames
