@@ -63,7 +63,7 @@ class RclpyNode(NodeBase):
         self._executor = SingleThreadedExecutor()
         self._executor.add_node(self.node)
         self._pending: list[tuple[int, int, int, Callable[[Any], None], Any]] = []
-        self._queued: dict[int, int] = {}  # id(subscription) → its index (creation order)
+        self._indices = itertools.count()  # of the subscriptions, in the order they were queued (created)
         self._sequence = itertools.count()
         self._worked = False
         self._condition = lambda: self._worked  # one object: rclpy compares the wait's arguments
@@ -167,9 +167,9 @@ class RclpyNode(NodeBase):
         every other message the subscription holds, with their source timestamps (the original
         callback runs in :meth:`_flush`)."""
         for sub in self.node.subscriptions:
-            if id(sub) in self._queued:
+            if getattr(sub.callback, "queues_for", None) is self:
                 continue
-            index = self._queued[id(sub)] = len(self._queued)
+            index = next(self._indices)
 
             def queue(msg: Any, info: dict, sub: Any = sub, callback: Callable[[Any], None] = sub.callback,
                       index: int = index) -> None:
@@ -181,6 +181,7 @@ class RclpyNode(NodeBase):
                         break
                     msg, info = taken
 
+            queue.queues_for = self  # type: ignore[attr-defined]
             sub.callback = queue  # two parameters: rclpy passes the message info
 
     def _flush(self) -> None:
