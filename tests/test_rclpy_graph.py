@@ -11,10 +11,15 @@
   ``/clock``, the obstacle (transient local) and diagnostics cross from Fast DDS to Cyclone, the
   actuator commands and the nodes' start-up diagnostics (transient local) from Cyclone to Fast DDS.
 
-Both runs are compared with the lockstep simulation of the same paper case (``moose simulate``).
-The case is the extreme series at τ = 2 s (7 m/s; 2.0 m clearance in lockstep): in the τ = 1.4 s case
-the outcome of a graph paced by the wall clock is decided by one-tick races on this shared 2-core
-machine (docs/design.md, "The graph on rclpy"), which a test cannot control.
+Both runs are compared with the lockstep simulation of the same paper case (``moose simulate``):
+these tests check that the graph computes the same thing on rclpy, not how fast (that is
+``bench/bench_graph.py``'s job).  The graph is paced by the wall clock, so its deviation from
+lockstep grows with the latency of each hop against the 10 ms tick; on this 2-core machine shared
+with other jobs (load averages of 12–16 seen) rclpy's hops reached p99 50–80 ms and a run at real
+time lost half its clearance.  The runs therefore go at half speed (``rate`` 0.5: 20 ms of wall
+time per tick), and the case is the extreme series at τ = 2 s (7 m/s; 2.0 m clearance in
+lockstep): in the τ = 1.4 s case the outcome is decided by one-tick races (docs/design.md, "The
+graph on rclpy"), which a test cannot control.
 Every process is on loopback (``tests/ros2_prefix.py``) in the test run's domain and bounded in time.
 """
 from __future__ import annotations
@@ -42,8 +47,10 @@ from moose_ros.interfaces import typestore
 pytestmark = [pytest.mark.graph, pytest.mark.slow]
 
 SCENARIO = "paper_v7_tau2"
+RATE = 0.5
+"""Simulated seconds per wall-clock second (see the module docstring)."""
 LIMIT = 240.0
-"""Seconds a graph run may take here (it takes about 25 s: start-up, then 9 s at real-time pace)."""
+"""Seconds a graph run may take here (it takes about 30 s: start-up, then 9 s at half speed)."""
 
 PROBE = textwrap.dedent(r'''
     import json, sys, time
@@ -107,7 +114,7 @@ MIXED = textwrap.dedent(r'''
     from moose_ros.launch import launch
     out = io.StringIO()
     summary = launch(load_scenario(sys.argv[1]), {"scenario": sys.argv[1]}, out=out, bag=sys.argv[3],
-                     runtime=json.loads(sys.argv[2]))
+                     runtime=json.loads(sys.argv[2]), rate=float(sys.argv[4]))
     print(out.getvalue())
     print(json.dumps(summary))
 ''')
@@ -172,12 +179,13 @@ def test_full_graph_on_rclpy_reproduces_the_lockstep_outcome_and_is_what_ros2_sh
                "motion_controller": ["use_sim_time", "simulation.planner"]}
     probe = subprocess.Popen(
         [ros_env["MOOSE_ROS_PYTHON"], "-c", PROBE, json.dumps([*nodes, "moose_monitor"]), json.dumps(list(TOPICS)),
-         json.dumps(queries), "90"], env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+         json.dumps(queries), "120"], env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         start_new_session=True)
     try:
         bag = tmp_path / "bag"
         result = run([ros_env["MOOSE_ROS_PYTHON"], "-m", "moose.cli", "launch", "--runtime", "rclpy", "--scenario",
-                      SCENARIO, "--json", str(tmp_path / "summary.json"), "--bag", str(bag)], ros_env, LIMIT)
+                      SCENARIO, "--rate", str(RATE), "--json", str(tmp_path / "summary.json"), "--bag", str(bag)],
+                     ros_env, LIMIT)
         assert result.returncode == 0, result.stderr[-3000:]
         try:
             seen, probe_err = probe.communicate(timeout=60)
@@ -221,12 +229,13 @@ def test_full_graph_on_rclpy_reproduces_the_lockstep_outcome_and_is_what_ros2_sh
                 assert durability == ("TRANSIENT_LOCAL" if want.transient_local else "VOLATILE"), (name, node_name)
 
     # parameters through rcl_interfaces: what the launcher gave each node
-    given = node_overrides("full", "combined", {"scenario": SCENARIO, "vehicle.mu": load_scenario(SCENARIO).mu})
+    given = node_overrides("full", "combined", {"scenario": SCENARIO, "vehicle.mu": load_scenario(SCENARIO).mu},
+                           rate=RATE)
     params = report["parameters"]
     assert params["observer"]["values"] == {"use_sim_time": True, "scenario": SCENARIO, "simulation.planner": "combined",
                                             "vehicle.mu": given["observer"]["vehicle.mu"]}
     assert params["vehicle_simulator"]["values"] == {
-        "use_sim_time": False, "scenario": SCENARIO, "seed": 0, "rate": 1.0, "vehicle_bus": "topics",
+        "use_sim_time": False, "scenario": SCENARIO, "seed": 0, "rate": RATE, "vehicle_bus": "topics",
         "wait_for": given["vehicle_simulator"]["wait_for"]}
     assert params["motion_controller"]["values"] == {"use_sim_time": True, "simulation.planner": "combined"}
     assert {"use_sim_time", "scenario", "vehicle.mu", "simulation.planner"} <= set(params["observer"]["names"])
@@ -246,7 +255,8 @@ def test_mixed_graph_simulator_and_observer_on_rclpy_the_rest_on_cyclone(
                 "msf_planner": "dds", "weight_fbl": "dds", "motion_controller": "dds"}
     env = {**dds_env, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}  # the launcher: .venv's interpreter, no rclpy
     env.pop("MOOSE_RUNTIME")
-    result = run([sys.executable, "-c", MIXED, SCENARIO, json.dumps(runtimes), str(tmp_path / "bag")], env, LIMIT)
+    result = run([sys.executable, "-c", MIXED, SCENARIO, json.dumps(runtimes), str(tmp_path / "bag"), str(RATE)], env,
+                 LIMIT)
     assert result.returncode == 0, result.stderr[-3000:]
     log, summary = result.stdout.rsplit("\n", 2)[0], json.loads(result.stdout.strip().splitlines()[-1])
     assert summary["runtime"] == {**runtimes, "moose_monitor": "dds"}
