@@ -15,11 +15,13 @@ Both runs are compared with the lockstep simulation of the same paper case (``mo
 these tests check that the graph computes the same thing on rclpy, not how fast (that is
 ``bench/bench_graph.py``'s job).  The graph is paced by the wall clock, so its deviation from
 lockstep grows with the latency of each hop against the 10 ms tick; on this 2-core machine shared
-with other jobs (load averages of 12–16 seen) rclpy's hops reached p99 50–80 ms and a run at real
-time lost half its clearance.  The runs therefore go at half speed (``rate`` 0.5: 20 ms of wall
-time per tick), and the case is the extreme series at τ = 2 s (7 m/s; 2.0 m clearance in
-lockstep): in the τ = 1.4 s case the outcome is decided by one-tick races (docs/design.md, "The
-graph on rclpy"), which a test cannot control.
+with other jobs (load averages of 12–19 seen) rclpy's hops reached p99 50–80 ms, the simulator's
+command guard fired (commands older than 50 ms), and a run at real time kept 0.99 m of clearance
+against 2.01 m in lockstep; at half speed a mixed run during the whole suite kept 1.73 m.  The
+runs therefore go at a quarter of real time (``rate`` 0.25: 40 ms of wall time per tick), and the
+case is the extreme series at τ = 2 s (7 m/s; 2.0 m clearance in lockstep): in the τ = 1.4 s case
+the outcome is decided by one-tick races (docs/design.md, "The graph on rclpy"), which a test
+cannot control.
 Every process is on loopback (``tests/ros2_prefix.py``) in the test run's domain and bounded in time.
 """
 from __future__ import annotations
@@ -47,10 +49,10 @@ from moose_ros.interfaces import typestore
 pytestmark = [pytest.mark.graph, pytest.mark.slow]
 
 SCENARIO = "paper_v7_tau2"
-RATE = 0.5
+RATE = 0.25
 """Simulated seconds per wall-clock second (see the module docstring)."""
 LIMIT = 240.0
-"""Seconds a graph run may take here (it takes about 30 s: start-up, then 9 s at half speed)."""
+"""Seconds a graph run may take here (about 45 s: start-up, then 9 simulated seconds at a quarter speed)."""
 
 PROBE = textwrap.dedent(r'''
     import json, sys, time
@@ -144,13 +146,14 @@ def run(cmd: list[str], env: dict[str, str], timeout: float) -> subprocess.Compl
 def check_outcome(summary: dict[str, Any], reference: dict[str, Any]) -> None:
     """The graph's verdict and threat equal the lockstep run's within the graph's timing: detection may
     lag one or two 10 ms ticks (transport hops), which moves τ by up to 0.02 s and the path a little."""
-    assert summary["collided"] is reference["collided"] is False
+    facts = {k: summary[k] for k in ("min_clearance_m", "tau_s", "nu", "max_lateral_offset_m", "diagnostics")}
+    assert summary["collided"] is reference["collided"] is False, facts
     assert summary["left_field"] is reference["left_field"] is False
     assert summary["passed_obstacle"] is reference["passed_obstacle"] is True
     assert summary["tau_s"] == pytest.approx(reference["tau_s"], abs=0.025)
     assert summary["nu"] == pytest.approx(reference["nu"], abs=0.05)
-    assert summary["min_clearance_m"] == pytest.approx(reference["min_clearance_m"], abs=0.2)
-    assert summary["max_lateral_offset_m"] == pytest.approx(reference["max_lateral_offset_m"], abs=0.3)
+    assert summary["min_clearance_m"] == pytest.approx(reference["min_clearance_m"], abs=0.2), facts
+    assert summary["max_lateral_offset_m"] == pytest.approx(reference["max_lateral_offset_m"], abs=0.3), facts
     assert summary["odom_samples"] > 800  # 9 s at 100 Hz, seen by the monitor
     # the simulator finished; every other node ran until the launcher stopped it (SIGTERM: rclpy exits 0,
     # a Cyclone node is ended by the signal)
