@@ -1,78 +1,89 @@
-"""Latency and drops through the node graph (separate processes, Cyclone DDS, loopback).
+"""Latency and drops through the node graph (separate processes, loopback), on both runtimes in one run.
 
-Runs the full graph on a 30 s moose test at real-time pace and, from an independent
-monitor process-side node, timestamps the arrival of each IMU sample, the state estimate
-the observer derives from it (same stamp) and the actuator command of the same 10 ms tick.
-Prints p50/p99 of IMU→estimate latency (transport both ways plus the observer's compute)
-and IMU→actuator latency (until the first actuator command sent after that estimate
-existed: it includes the 100 Hz controller's timer phase, up to 10 ms by design), and the
-share of messages that never arrived against the designed rates.  Run: ``python bench/bench_graph.py``.
+For each runtime — our Cyclone DDS runtime, and rclpy on Fast DDS from the ROS 2 prefix of ``make ros``
+(skipped, saying why, without it) — a process of that runtime runs the full graph on a 30 s moose
+test at real-time pace (``moose_ros.launch.launch``, every node and the launcher's monitor on that
+runtime) and, from a latency monitor node of the same runtime, timestamps the arrival of each IMU
+sample, the state estimate the observer derives from it (same stamp) and the actuator command of the
+same 10 ms tick.  Printed: p50/p99 of IMU→estimate latency (transport both ways plus the observer's
+compute) and IMU→actuator latency (until the first actuator command sent after that estimate
+existed: it includes the 100 Hz controller's timer phase, up to 10 ms by design), the share of
+messages that never arrived against the designed rates, and the one-way latency of one hop between
+two otherwise idle processes (no compute).  Both vendors discover on loopback only, in a DDS domain
+claimed with ``tests/isolation.py``.  Run: ``python bench/bench_graph.py``.
 """
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import io
+import json
 import os
+import subprocess
+import sys
 import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from moose.scenario import load_scenario
-from moose_ros import convert as cv
-from moose_ros.graph import ACTUATOR_COMMAND, IMU, STATE
-from moose_ros.launch import launch
-from moose_ros.runtime import QOS_SENSOR, DdsNode
-
+REPO = Path(__file__).resolve().parents[1]
 SIM_SECONDS = 30.0
+PINGS = 1000
+CYCLONE_LOOPBACK = ('<CycloneDDS><Domain Id="any"><General><Interfaces><NetworkInterface name="lo"/>'
+                    "</Interfaces><AllowMulticast>spdp</AllowMulticast></General></Domain></CycloneDDS>")
 
 PINGER = """
 import sys, time
 from moose_ros.runtime import create_node, QOS_SENSOR
 node = create_node("transport_pinger")
 pub = node.publisher("sensor_msgs/msg/Imu", "/bench/ping", QOS_SENSOR)
-time.sleep(1.0)
+deadline = time.monotonic() + 30
+while pub.subscription_count() == 0 and time.monotonic() < deadline:
+    node.spin_once(0.05)
 for k in range(int(sys.argv[1])):
     msg = node.make("sensor_msgs/msg/Imu")
     now = time.monotonic()  # CLOCK_MONOTONIC: one clock for every process of this machine
     msg.header.stamp.sec, msg.header.stamp.nanosec = int(now), int((now % 1) * 1e9)
     pub(msg)
-    time.sleep(0.01)
-time.sleep(0.3)
+    node.spin_once(0.01)
+node.shutdown()
 """
 
 
-def transport(count: int = 1000) -> np.ndarray:
+def transport(count: int) -> list[float]:
     """One-way latency (s) of an IMU message between two processes, nothing computed on either side."""
-    import subprocess
-    import sys
+    from moose_ros import convert as cv
+    from moose_ros.runtime import QOS_SENSOR, create_node
 
-    node = DdsNode("transport_bench")
+    node = create_node("transport_bench")
     latencies: list[float] = []
     node.subscription("sensor_msgs/msg/Imu", "/bench/ping",
                       lambda m: latencies.append(time.monotonic() - cv.time_of(m)), QOS_SENSOR)
     proc = subprocess.Popen([sys.executable, "-c", PINGER, str(count)])
     try:
-        while proc.poll() is None:
+        deadline = time.monotonic() + 120
+        while proc.poll() is None and time.monotonic() < deadline:
             node.spin_once(0.01)
         node.spin_once(0.2)
     finally:
-        proc.kill()
+        if proc.poll() is None:
+            proc.kill()
         proc.wait()
         node.shutdown()
-    return np.array(latencies)
+    return latencies
 
 
-def main() -> None:
-    os.environ.setdefault("ROS_DOMAIN_ID", str(1 + os.getpid() % 200))
-    if "CYCLONEDDS_URI" not in os.environ:
-        config = Path(tempfile.mkdtemp()) / "cyclonedds.xml"
-        config.write_text('<CycloneDDS><Domain Id="any"><General><Interfaces><NetworkInterface name="lo"/>'
-                          "</Interfaces><AllowMulticast>spdp</AllowMulticast></General></Domain></CycloneDDS>")
-        os.environ["CYCLONEDDS_URI"] = config.as_uri()
-    os.environ.setdefault("MOOSE_RUNTIME", "dds")
+def measure() -> dict[str, Any]:
+    """The graph and transport figures on this process's runtime (MOOSE_RUNTIME)."""
+    from moose.scenario import load_scenario
+    from moose_ros import convert as cv
+    from moose_ros.graph import ACTUATOR_COMMAND, IMU, STATE
+    from moose_ros.launch import launch
+    from moose_ros.runtime import create_node
+
     scenario = dataclasses.replace(load_scenario("paper_v5_tau3"), duration=SIM_SECONDS - 1.0)
     arrivals: dict[str, dict[int, float]] = {"imu": {}, "state": {}, "command": {}}
 
@@ -81,7 +92,7 @@ def main() -> None:
             arrivals[kind].setdefault(round(cv.time_of(msg) * 100), time.monotonic())
         return callback
 
-    monitor = DdsNode("latency_monitor")
+    monitor = create_node("latency_monitor")
     IMU.subscription(monitor, record("imu"))
     STATE.subscription(monitor, record("state"))
     ACTUATOR_COMMAND.subscription(monitor, record("command"))
@@ -92,9 +103,6 @@ def main() -> None:
     while runner.is_alive():
         monitor.spin_once(0.01)
     monitor.shutdown()
-    expected = int(SIM_SECONDS * 100)
-    print(f"graph run: {SIM_SECONDS:.0f} s simulated at real-time pace; outcome collided={result.get('collided')}")
-    print(f"{'hop':>18} {'p50 ms':>8} {'p99 ms':>8} {'received':>10} {'dropped':>8}")
     commands = np.array(sorted(arrivals["command"].values()))
     estimate, actuator = [], []
     for k, t_imu in arrivals["imu"].items():
@@ -105,15 +113,70 @@ def main() -> None:
         i = np.searchsorted(commands, t_state)
         if i < len(commands):
             actuator.append(commands[i] - t_imu)  # first command sent after the estimate existed
-    for name, lat, kind in (("IMU -> estimate", estimate, "state"), ("IMU -> actuator", actuator, "command")):
-        lat_ms = np.array(lat) * 1e3
-        print(f"{name:>18} {np.percentile(lat_ms, 50):8.2f} {np.percentile(lat_ms, 99):8.2f} "
-              f"{len(arrivals[kind]):>10} {100 * max(0, expected - len(arrivals[kind])) / expected:7.1f}%")
-    print(f"{'IMU samples':>18} {'':>8} {'':>8} {len(arrivals['imu']):>10} "
-          f"{100 * max(0, expected - len(arrivals['imu'])) / expected:7.1f}%")
-    lat = transport() * 1e3
-    print(f"{'transport only':>18} {np.percentile(lat, 50):8.2f} {np.percentile(lat, 99):8.2f} {len(lat):>10} "
-          f"{100 * max(0, 1000 - len(lat)) / 1000:7.1f}%   (one hop between two processes, 100 Hz, no compute)")
+    return {"runtime": result.get("runtime"), "collided": result.get("collided"), "estimate": estimate,
+            "actuator": actuator, "received": {k: len(v) for k, v in arrivals.items()},
+            "transport": transport(PINGS)}
+
+
+def report(name: str, figures: dict[str, Any]) -> dict[str, float]:
+    """Print one runtime's table; returns its p50/p99 (ms)."""
+    expected = int(SIM_SECONDS * 100)
+    runtimes = sorted(set(figures["runtime"].values())) if figures["runtime"] else ["?"]
+    print(f"\n{name}: graph of {SIM_SECONDS:.0f} s at real-time pace (nodes and monitor on {', '.join(runtimes)}); "
+          f"collided={figures['collided']}")
+    print(f"{'hop':>18} {'p50 ms':>8} {'p99 ms':>8} {'received':>10} {'dropped':>8}")
+    out = {}
+    rows = (("IMU -> estimate", figures["estimate"], figures["received"]["state"], expected),
+            ("IMU -> actuator", figures["actuator"], figures["received"]["command"], expected),
+            ("IMU samples", None, figures["received"]["imu"], expected),
+            ("transport only", figures["transport"], len(figures["transport"]), PINGS))
+    for hop, latencies, received, wanted in rows:
+        dropped = f"{100 * max(0, wanted - received) / wanted:7.1f}%"
+        if latencies is None:
+            print(f"{hop:>18} {'':>8} {'':>8} {received:>10} {dropped}")
+            continue
+        lat = np.array(latencies) * 1e3
+        p50, p99 = np.percentile(lat, 50), np.percentile(lat, 99)
+        out[hop] = (p50, p99)
+        print(f"{hop:>18} {p50:8.2f} {p99:8.2f} {received:>10} {dropped}")
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--measure", action="store_true", help="(internal) measure on this process's runtime")
+    if parser.parse_args().measure:
+        print(json.dumps(measure()))
+        return
+    sys.path.insert(0, str(REPO / "tests"))
+    from isolation import claim_domain
+
+    from moose.params import ParamError
+    from moose_ros.runtime import process
+
+    config = Path(tempfile.mkdtemp()) / "cyclonedds.xml"
+    config.write_text(CYCLONE_LOOPBACK)
+    base = {**os.environ, "ROS_DOMAIN_ID": str(claim_domain()), "CYCLONEDDS_URI": config.as_uri(),
+            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}  # rmw_fastrtps on loopback; Cyclone by the file
+    print(f"bench_graph: DDS domain {base['ROS_DOMAIN_ID']}, loopback only; {os.cpu_count()} cores")
+    figures = {}
+    for name in ("dds", "rclpy"):
+        try:
+            python, env = process(name, base)
+        except ParamError as exc:
+            print(f"\n{name}: not measured: {exc}")
+            continue
+        result = subprocess.run([python, __file__, "--measure"], env=env, capture_output=True, text=True, timeout=600)
+        if result.returncode != 0:
+            print(f"\n{name}: failed (exit {result.returncode}): {result.stderr[-2000:]}")
+            continue
+        figures[name] = report({"dds": "Cyclone DDS runtime", "rclpy": "rclpy on Fast DDS"}[name],
+                               json.loads(result.stdout.strip().splitlines()[-1]))
+    if len(figures) == 2:
+        print("\nrclpy / Cyclone, same run (p50, p99):")
+        for hop in figures["dds"]:
+            (a50, a99), (b50, b99) = figures["dds"][hop], figures["rclpy"][hop]
+            print(f"{hop:>18} {b50 / a50:6.1f}x {b99 / a99:6.1f}x")
 
 
 if __name__ == "__main__":

@@ -16,11 +16,12 @@ Steps, each skipped when its inputs have not changed:
    CMake targets name that image's Python and NumPy include folders. They are replaced by the local
    interpreter's and NumPy's (every run, idempotent); then every include folder that an exported
    target names must exist, or the run stops and names them.
-3. **moose_msgs.** ``ros2_ws/src/moose_msgs`` (the ``.msg`` files are the single source) is built
-   with CMake, the rosidl generators and ament_cmake of the same wheels (C, C++ and Python type
-   support) into ``PREFIX/install``, and every message class is checked through rclpy (type support
-   loads, a default message serialises and deserialises). Rebuilt from scratch when the package
-   files, the installed wheel set, the toolchain or this script change (the key is stored in
+3. **Messages.** ``ros2_ws/upstream/tf2_msgs`` (Jazzy's ``TFMessage``, which no wheel carries),
+   then ``ros2_ws/src/moose_msgs`` (the ``.msg`` files are the single source), are built with CMake,
+   the rosidl generators and ament_cmake of the same wheels (C, C++ and Python type support) into
+   ``PREFIX/install``, and every message class is checked through rclpy (type support loads, a
+   default message serialises and deserialises). Rebuilt from scratch when the package files, the
+   installed wheel set, the toolchain or this script change (the key is stored in
    ``PREFIX/install/.build-key``, written last, so an interrupted build is redone).
 4. **Environment.** ``PREFIX/ros-env.json`` (read by :func:`environment`) and ``PREFIX/setup.sh``
    (the same values for a shell): ``AMENT_PREFIX_PATH``, ``CMAKE_PREFIX_PATH``, ``LD_LIBRARY_PATH``,
@@ -48,6 +49,8 @@ from typing import Iterable, Mapping, Optional
 REPO = Path(__file__).resolve().parents[1]
 REQUIREMENTS = REPO / "ros2_ws" / "requirements-jazzy.txt"
 MSGS = REPO / "ros2_ws" / "src" / "moose_msgs"
+PACKAGES = (REPO / "ros2_ws" / "upstream" / "tf2_msgs", MSGS)
+"""The message packages built into the prefix, in build order."""
 PROJECT_FILES = (REPO / "pyproject.toml", REPO / "ros2_ws" / "src" / "moose_ros" / "setup.py")
 DISTRO = "jazzy"
 RMW = "rmw_fastrtps_cpp"
@@ -79,12 +82,13 @@ import sys
 import rclpy
 from rclpy.serialization import deserialize_message, serialize_message
 from rclpy.type_support import check_is_valid_msg_type
-import moose_msgs.msg
+from importlib import import_module
 for name in sys.argv[1:]:
-    cls = getattr(moose_msgs.msg, name)
+    package, _, kind = name.split("/")
+    cls = getattr(import_module(package + ".msg"), kind)
     check_is_valid_msg_type(cls)
     if deserialize_message(serialize_message(cls()), cls) != cls():
-        sys.exit("moose_msgs/msg/%s does not survive serialisation" % name)
+        sys.exit("%s does not survive serialisation" % name)
 print("%d messages" % (len(sys.argv) - 1))
 """
 
@@ -214,15 +218,15 @@ def patch_exports(prefix: Path, info: dict) -> int:
 
 
 def msg_names() -> list[str]:
-    """The message types of moose_msgs, from its .msg files."""
-    return sorted(p.stem for p in (MSGS / "msg").glob("*.msg"))
+    """The message types built here (``pkg/msg/Name``), from the packages' .msg files."""
+    return [f"{pkg.name}/msg/{p.stem}" for pkg in PACKAGES for p in sorted((pkg / "msg").glob("*.msg"))]
 
 
 def build_key(info: dict) -> str:
-    """What the moose_msgs build depends on: its package files, the installed wheel set (NumPy
+    """What the message build depends on: the packages' files, the installed wheel set (NumPy
     included), the toolchain and this script."""
-    sources = sorted(p for p in MSGS.rglob("*") if p.is_file())
-    parts = [str(p.relative_to(MSGS)).encode() + b"\0" + p.read_bytes() for p in sources]
+    sources = sorted(p for pkg in PACKAGES for p in pkg.rglob("*") if p.is_file())
+    parts = [str(p.relative_to(REPO)).encode() + b"\0" + p.read_bytes() for p in sources]
     parts += [Path(__file__).read_bytes(), json.dumps(info["dists"]).encode(), info["version"].encode(),
               _first_line(["cmake", "--version"]).encode(), _first_line(["c++", "--version"]).encode(),
               _first_line(["cc", "--version"]).encode()]
@@ -252,27 +256,29 @@ def spec(prefix: Path, info: dict) -> dict:
 
 
 def build_msgs(prefix: Path, info: dict, values: dict, jobs: int, log: Path) -> bool:
-    """Step 3: generate and build moose_msgs into PREFIX/install.  Returns False when it was current."""
+    """Step 3: generate and build the message packages into PREFIX/install.  Returns False when it was current."""
     key = build_key(info)
     install = prefix / "install"
     stamp = install / BUILD_KEY_FILE
     if stamp.is_file() and stamp.read_text(encoding="utf-8").strip() == key:
         return False
-    build = prefix / "build" / "moose_msgs"
-    for folder in (build, install):
+    for folder in (prefix / "build" / "msgs", install):
         if folder.exists():
             shutil.rmtree(folder)
-    env = _quiet_env({"AMENT_PREFIX_PATH": str(prefix),
+    search = os.pathsep.join([str(install), str(prefix)])  # a package finds the ones built before it
+    env = _quiet_env({"AMENT_PREFIX_PATH": search,
                       "PATH": os.pathsep.join([str(prefix / "bin"), os.environ.get("PATH", "")])})
-    _run(["cmake", "-S", str(MSGS), "-B", str(build), f"-DCMAKE_PREFIX_PATH={prefix}",
-          f"-DPython3_EXECUTABLE={prefix / 'bin' / 'python'}", "-DBUILD_TESTING=OFF",
-          "-DCMAKE_BUILD_TYPE=Release", f"-DCMAKE_INSTALL_PREFIX={install}"], log, env)
-    _run(["cmake", "--build", str(build), "-j", str(jobs)], log, env)
-    _run(["cmake", "--install", str(build)], log, env)
+    for package in PACKAGES:
+        build = prefix / "build" / "msgs" / package.name
+        _run(["cmake", "-S", str(package), "-B", str(build), f"-DCMAKE_PREFIX_PATH={install};{prefix}",
+              f"-DPython3_EXECUTABLE={prefix / 'bin' / 'python'}", "-DBUILD_TESTING=OFF",
+              "-DCMAKE_BUILD_TYPE=Release", f"-DCMAKE_INSTALL_PREFIX={install}"], log, env)
+        _run(["cmake", "--build", str(build), "-j", str(jobs)], log, env)
+        _run(["cmake", "--install", str(build)], log, env)
     names = msg_names()
     out = _run([str(prefix / "bin" / "python"), "-c", _CHECK, *names], log, apply(values, _quiet_env()))
     if out.strip() != f"{len(names)} messages":
-        raise PrefixError(f"moose_msgs check printed {out.strip()!r}, expected '{len(names)} messages'")
+        raise PrefixError(f"message check printed {out.strip()!r}, expected '{len(names)} messages'")
     stamp.write_text(key + "\n", encoding="utf-8")
     return True
 
@@ -319,7 +325,7 @@ def main(argv: Optional[list[str]] = None) -> int:
         print(f"ros_prefix: error: {err}", file=sys.stderr)
         return 1
     print(f"ros_prefix: wheels {'installed' if installed else 'current'} ({t1 - t0:.1f} s), "
-          f"{patched} CMake export files patched, moose_msgs {'built' if built else 'current'} "
+          f"{patched} CMake export files patched, tf2_msgs and moose_msgs {'built' if built else 'current'} "
           f"({t2 - t1:.1f} s) for Python {info['version']}")
     print(f"ros_prefix: environment: . {prefix / SETUP_FILE}   (or {prefix / ENV_FILE})")
     return 0

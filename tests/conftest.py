@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 
 from isolation import claim_domain
+from ros2_prefix import dds_env, ros_env  # noqa: F401 - fixtures of the ROS 2 prefix tests
 
 
 @pytest.fixture(scope="session", autouse=True)

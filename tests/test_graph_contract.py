@@ -4,17 +4,21 @@ from __future__ import annotations
 
 import ast
 import dataclasses
+import importlib.util
 import re
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from moose.canbus.bus import DEFAULT_GROUP
 from moose.canbus.ecu import VehicleEcu
 from moose.canbus.safety import GuardParams
+from moose.scenario import load_scenario
 from moose_ros.graph import COMMAND_TIMEOUT, GRAPHS, GROUPS, NODES, TOPICS, publishes, subscribes, topic_table
+from moose_ros.launch import node_overrides
 from moose_ros.nodes import node_class
 from moose_ros.parameters import NODE_PARAMETERS, node_parameters
 from moose_ros.runtime import DdsNode
@@ -73,11 +77,59 @@ def test_each_node_creates_exactly_the_endpoints_of_the_contract(name: str, tmp_
     assert _node_endpoints(name, tmp_path) == expected
 
 
-def test_setup_entry_points_launch_file_and_compose_follow_the_contract() -> None:
+def _launch_file(name: str) -> Any:
+    """A ROS 2 launch file of the package as a module (it imports ``launch`` only when ROS 2 runs it)."""
+    spec = importlib.util.spec_from_file_location(name.replace(".", "_"), PACKAGE / "launch" / name)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize("with_simulator", [True, False])
+@pytest.mark.parametrize("planner", ["combined", "mpc", "msf"])
+def test_ros2_launch_file_starts_what_moose_launch_starts(with_simulator: bool, planner: str) -> None:
+    """``ros2 launch moose_ros moose_graph.launch.py``, whole or one ECU group per launch (docker compose):
+    the nodes of ``moose launch``'s graph (``full``, or ``car`` without the simulator) with its parameters."""
+    graph_launch = _launch_file("moose_graph.launch.py")
+    scenario = "paper_v7_tau2"
+    graph = "full" if with_simulator else "car"
+    started = {group: graph_launch.node_parameters(group, with_simulator, scenario, planner)
+               for group in ["all", *GROUPS]}
+    expected = [n for n in GRAPHS[graph] if n != {"mpc": "msf_planner", "msf": "mpc_planner"}.get(planner)]
+    assert list(started["all"]) == expected
+    by_group = [name for group in GROUPS for name in started[group]]
+    assert sorted(by_group) == sorted(expected)  # every node once, whichever way the groups are launched
+    assert all(set(started[group]) <= set(GROUPS[group]) for group in GROUPS)
+    mu = load_scenario(scenario).mu
+    for name, parameters in started["all"].items():
+        (given,) = parameters
+        assert given == node_overrides(graph, planner, {"scenario": scenario, "vehicle.mu": mu})[name]
+        assert given["use_sim_time"] is (with_simulator and name != "vehicle_simulator")
+        assert given["vehicle.mu"] == mu and given["simulation.planner"] == planner  # one road, one mode
+    if with_simulator:  # it starts the clock once every other node of the graph has announced itself
+        assert started["vehicle"]["vehicle_simulator"][0]["wait_for"] == [n for n in expected if n != "vehicle_simulator"]
+    params_file = str(ROOT / "config" / "moose.yaml")
+    with_file = graph_launch.node_parameters("all", with_simulator, scenario, planner, params_file)
+    assert all(p[0] == params_file and p[1] == started["all"][n][0] for n, p in with_file.items())
+
+
+def test_ros2_launch_files_start_the_package_executables() -> None:
+    """The Node actions run the console scripts of setup.py under their own names; the car's launch is the
+    graph's without the simulator."""
+    tree = ast.parse((PACKAGE / "launch" / "moose_graph.launch.py").read_text(encoding="utf-8"))
+    calls = [c for c in ast.walk(tree) if isinstance(c, ast.Call) and getattr(c.func, "id", "") == "Node"]
+    assert len(calls) == 1
+    keywords = {k.arg: ast.unparse(k.value) for k in calls[0].keywords}
+    assert keywords == {"package": "'moose_ros'", "executable": "name", "name": "name", "output": "'screen'",
+                        "parameters": "parameters"}
+    car = (PACKAGE / "launch" / "moose_car.launch.py").read_text(encoding="utf-8")
+    assert '"moose_graph.launch.py"' in car and 'launch_arguments={"with_simulator": "false"}' in car
+
+
+def test_setup_entry_points_and_compose_follow_the_contract() -> None:
     setup = (PACKAGE / "setup.py").read_text(encoding="utf-8")
     assert ast.literal_eval(re.search(r"NODES = (\[.*?\])", setup, re.S).group(1)) == list(NODES)
-    launch_file = (PACKAGE / "launch" / "moose_graph.launch.py").read_text(encoding="utf-8")
-    assert "from moose_ros.graph import GROUPS, NODES" in launch_file and "parameter_names(name)" in launch_file
     import yaml
 
     compose = yaml.safe_load((ROOT / "docker" / "compose.yaml").read_text(encoding="utf-8"))

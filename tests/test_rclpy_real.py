@@ -10,13 +10,11 @@ the Cyclone configuration rmw_cyclonedds makes of it), in the test run's own dom
 capture on every interface checks that no RTPS packet of that domain leaves loopback.
 
 Skipped when the ROS prefix has not been made (``make ros``); with ``MOOSE_REQUIRE_ROS=1`` (CI)
-that is a failure.  A prefix built from other sources (a changed ``.msg`` file, other wheels) is a
-failure too: ``make ros`` brings it up to date.
+that is a failure (``tests/ros2_prefix.py``).
 """
 from __future__ import annotations
 
 import contextlib
-import importlib.util
 import json
 import os
 import shutil
@@ -30,21 +28,9 @@ from typing import Any, Iterator, Optional
 import pytest
 from rtps_capture import RtpsCapture
 
-REPO = Path(__file__).resolve().parents[1]
 ODOM, COMMAND = "nav_msgs/msg/Odometry", "moose_msgs/msg/ActuatorCommand"
 LIMIT = 30.0
 """Seconds a listener waits for all samples (discovery and delivery take well under 5 s here)."""
-
-
-def _ros_prefix() -> Any:
-    spec = importlib.util.spec_from_file_location("ros_prefix", REPO / "ros2_ws" / "ros_prefix.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-ros_prefix = _ros_prefix()
 
 
 def _sample(i: int, kind: str) -> dict[str, Any]:
@@ -173,50 +159,6 @@ CHILD = textwrap.dedent(r'''
     finally:
         close()
 ''')
-
-
-# -- the ROS prefix --------------------------------------------------------------------
-
-def _prefix_problem(prefix: Path) -> tuple[str, str]:
-    """('skip' | 'fail' | '', reason) for the prefix at ``prefix``."""
-    if not (prefix / ros_prefix.ENV_FILE).is_file():
-        return "skip", (f"the ROS 2 Jazzy prefix is not built ({prefix / ros_prefix.ENV_FILE} is missing): "
-                        "`make ros` installs rclpy from wheels and builds moose_msgs (README, 'ROS 2 client')")
-    stamp = prefix / ros_prefix.INSTALL_KEY_FILE
-    if not stamp.is_file() or stamp.read_text(encoding="utf-8").strip() != ros_prefix.install_key():
-        return "fail", f"{prefix} was installed from other requirements, another checkout or another Python: run `make ros`"
-    info = ros_prefix.query(prefix)
-    built = prefix / "install" / ros_prefix.BUILD_KEY_FILE
-    if not built.is_file() or built.read_text(encoding="utf-8").strip() != ros_prefix.build_key(info):
-        return "fail", f"moose_msgs in {prefix} is not built from the current sources: run `make ros`"
-    return "", ""
-
-
-@pytest.fixture(scope="module")
-def ros_env() -> dict[str, str]:
-    """The environment of an rclpy process: the prefix's variables, on this host only."""
-    prefix = ros_prefix.default_prefix()
-    verdict, reason = _prefix_problem(prefix)
-    if verdict == "skip" and os.environ.get("MOOSE_REQUIRE_ROS") != "1":
-        pytest.skip(reason)
-    if verdict:
-        pytest.fail(reason)
-    return ros_prefix.environment(prefix, {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"})
-
-
-@pytest.fixture(scope="module")
-def dds_env(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
-    """The environment of a process on our Cyclone DDS runtime: what rmw_cyclonedds (Jazzy) makes
-    of ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST (no multicast, localhost as the only peer, participant
-    indices for unicast discovery), bound to the loopback interface."""
-    config = tmp_path_factory.mktemp("dds-localhost") / "cyclonedds.xml"
-    config.write_text(
-        '<CycloneDDS><Domain Id="any"><General><Interfaces><NetworkInterface name="lo"/></Interfaces>'
-        "<AllowMulticast>false</AllowMulticast></General><Discovery><ParticipantIndex>auto</ParticipantIndex>"
-        '<MaxAutoParticipantIndex>32</MaxAutoParticipantIndex><Peers><Peer address="localhost"/></Peers>'
-        "</Discovery></Domain></CycloneDDS>"
-    )
-    return {**os.environ, "CYCLONEDDS_URI": config.as_uri(), "MOOSE_RUNTIME": "dds"}
 
 
 # -- processes -------------------------------------------------------------------------

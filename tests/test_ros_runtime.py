@@ -342,24 +342,28 @@ def test_numpy_values_are_published_as_plain_values() -> None:
     assert got[0].STATUS_CAPPED == 1
 
 
-def test_rclpy_backend_when_ros2_is_installed() -> None:
-    """Runs in the ROS 2 image only (rclpy is not installable here)."""
-    pytest.importorskip("rclpy")
-    os.environ.pop("MOOSE_RUNTIME", None)
-    saved = os.environ.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)
-    try:
-        node = create_node("rclpy_check", overrides={"use_sim_time": True, "vehicle.mu": 0.4})
-        assert type(node).__name__ == "RclpyNode"
-        assert os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"  # ROS 2's setting, made before rclpy.init
-        assert node.use_sim_time is True and node.param("vehicle.mu") == 0.4 and node.now() == 0.0
-        msg = node.make(WHEELS, omega_rl=1.0)
-        assert msg.omega_rl == 1.0
-        pub = node.publisher(WHEELS, "rt_test/rclpy")
-        with pytest.raises(TypeError, match="carries"):
-            pub(node.make("moose_msgs/msg/SteeringReport"))
-        node.shutdown()
-    finally:
-        os.environ["MOOSE_RUNTIME"] = "dds"
-        os.environ.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)
-        if saved is not None:
-            os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = saved
+RCLPY_CHECK = textwrap.dedent("""
+    import os
+    import pytest
+    from moose_ros.runtime import create_node
+    os.environ.pop("MOOSE_RUNTIME", None)  # the default: rclpy, importable here
+    os.environ.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)
+    node = create_node("rclpy_check", overrides={"use_sim_time": True, "vehicle.mu": 0.4})
+    assert type(node).__name__ == "RclpyNode"
+    assert os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"  # ROS 2's setting, made before rclpy.init
+    assert node.use_sim_time is True and node.param("vehicle.mu") == 0.4 and node.now() == 0.0
+    msg = node.make("moose_msgs/msg/WheelSpeeds", omega_rl=1.0)
+    assert msg.omega_rl == 1.0
+    pub = node.publisher("moose_msgs/msg/WheelSpeeds", "rt_test/rclpy")
+    with pytest.raises(TypeError, match="carries"):
+        pub(node.make("moose_msgs/msg/SteeringReport"))
+    node.shutdown()
+    print("rclpy backend ok")
+""")
+
+
+def test_rclpy_backend_when_ros2_is_installed(ros_env: dict[str, str]) -> None:
+    """In the interpreter of the ROS 2 prefix (make ros): create_node picks rclpy by default."""
+    result = subprocess.run([ros_env["MOOSE_ROS_PYTHON"], "-c", RCLPY_CHECK], env=ros_env, capture_output=True,
+                            text=True, timeout=120)
+    assert result.returncode == 0 and "rclpy backend ok" in result.stdout, result.stderr[-3000:]

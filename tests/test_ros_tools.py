@@ -255,9 +255,11 @@ def test_rclpy_sees_every_node_its_endpoints_and_type_hashes(graph: Graph) -> No
             if theirs is not None:
                 assert hash_ == theirs, (topic, contract.type)
                 checked_with_rclpy.add(contract.type)
-    # every standard type the client has (tf2_msgs is not among the wheels: its hash is checked against
-    # Jazzy's published value in test_ros_introspection.py), and moose_msgs' when they are built for it
+    # every standard type the client has, and moose_msgs' and tf2_msgs' when `make ros` built them (no wheel
+    # carries tf2_msgs; test_ros_introspection.py also checks its hash against Jazzy's published value)
     importable = {t for t, h in seen["rclpy_hashes"].items() if h}
     assert {"nav_msgs/msg/Odometry", "sensor_msgs/msg/Imu", "rosgraph_msgs/msg/Clock", "diagnostic_msgs/msg/DiagnosticArray",
             "visualization_msgs/msg/MarkerArray"} <= importable
+    if any(t.startswith("moose_msgs/") for t in importable):
+        assert "tf2_msgs/msg/TFMessage" in importable
     assert checked_with_rclpy == importable & {t.type for t in TOPICS.values()}

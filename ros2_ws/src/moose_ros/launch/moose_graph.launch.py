@@ -3,46 +3,50 @@
 Groups mirror the vehicle's ECUs (moose_ros.graph.GROUPS): perception (observer, obstacle
 detector), planning (MPC, MSF, weight function + FBL; the MicroLabBox), control (motion
 controller; the AutoBox), vehicle (the plant simulator) and bridge (the CAN bridge, which replaces
-the simulator on the car: ``with_simulator:=false``).  Each node gets only the parameters it takes
-(moose_ros.parameters), as with ``moose launch``.
+the simulator on the car: ``with_simulator:=false``).  Which nodes start and the parameters each
+gets are ``moose launch``'s (:func:`moose_ros.launch.node_overrides` of the graph ``full``, or
+``car`` without the simulator; :func:`node_parameters` here, checked by tests/test_graph_contract.py):
+only the parameters a node takes, simulated time where the simulator publishes /clock, the
+scenario's road friction for every node, and the simulator waits for every other node of the
+graph (whichever group launches them) before it starts the clock.
 """
 import typing
 
-from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, OpaqueFunction
-from launch.substitutions import LaunchConfiguration
-from launch_ros.actions import Node
-
 from moose.cli.common import DEFAULT_SCENARIO
 from moose.schema import PlannerMode
-from moose_ros.graph import GROUPS, NODES
-from moose_ros.parameters import parameter_names
+from moose_ros.graph import GROUPS
+
+
+def node_parameters(group: str, with_simulator: bool, scenario: str, planner: str,
+                    params_file: str = "") -> dict[str, list]:
+    """``{node: parameters}`` of the nodes this launch starts: the parameter file (if any), then the
+    overrides ``moose launch`` gives the node (which win)."""
+    from moose.scenario import load_scenario
+    from moose_ros.launch import node_overrides
+
+    mu = load_scenario(scenario).mu
+    given = {"scenario": scenario, **({"vehicle.mu": mu} if mu is not None else {})}  # as moose launch
+    overrides = node_overrides("full" if with_simulator else "car", planner, given, params_file or None)
+    return {name: ([params_file] if params_file else []) + [values] for name, values in overrides.items()
+            if group == "all" or name in GROUPS[group]}
 
 
 def nodes(context, *args, **kwargs):
-    group = LaunchConfiguration("group").perform(context)
-    names = list(NODES) if group == "all" else list(GROUPS[group])
-    # with the simulator its topics stand in for the vehicle bus; on the car the CAN bridge does
-    simulated = LaunchConfiguration("with_simulator").perform(context) == "true"
-    excluded = "can_bridge" if simulated else "vehicle_simulator"
-    names = [n for n in names if n != excluded]
-    params_file = LaunchConfiguration("params_file").perform(context)
-    given = {
-        "scenario": LaunchConfiguration("scenario").perform(context),
-        "simulation.planner": LaunchConfiguration("planner").perform(context),
-    }
+    from launch.substitutions import LaunchConfiguration
+    from launch_ros.actions import Node
 
-    def parameters(name):
-        own = {k: v for k, v in given.items() if "." in k or k in parameter_names(name)}
-        # simulated time only where the simulator publishes /clock; the car runs on wall-clock time
-        own["use_sim_time"] = simulated and name != "vehicle_simulator"
-        return [params_file, own] if params_file else [own]
-
-    return [Node(package="moose_ros", executable=name, name=name, output="screen", parameters=parameters(name))
-            for name in names]
+    value = {key: LaunchConfiguration(key).perform(context)
+             for key in ("group", "with_simulator", "scenario", "planner", "params_file")}
+    chosen = node_parameters(value["group"], value["with_simulator"] == "true", value["scenario"], value["planner"],
+                             value["params_file"])
+    return [Node(package="moose_ros", executable=name, name=name, output="screen", parameters=parameters)
+            for name, parameters in chosen.items()]
 
 
 def generate_launch_description():
+    from launch import LaunchDescription
+    from launch.actions import DeclareLaunchArgument, OpaqueFunction
+
     return LaunchDescription([
         DeclareLaunchArgument("group", default_value="all", choices=["all", *GROUPS]),
         DeclareLaunchArgument("with_simulator", default_value="true", choices=["true", "false"]),

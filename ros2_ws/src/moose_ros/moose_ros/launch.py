@@ -1,8 +1,13 @@
 """Launch the node graph as separate OS processes without ROS 2 (``moose launch``).
 
 Each node runs as ``python -m moose_ros.nodes NAME``; their output is streamed with a
-``[name]`` prefix.  A monitor in this process listens to the graph (odometry, steering,
-plans, blends, threats, diagnostics) and builds the same summary as ``moose simulate``.
+``[name]`` prefix.  ``runtime`` chooses what the nodes run on (:mod:`moose_ros.runtime`: ``rclpy``
+or ``dds``, for all or per node; default: this interpreter's); a node on rclpy that this
+interpreter cannot run is started with the interpreter and environment of the ROS 2 prefix of
+``make ros`` (:func:`moose_ros.runtime.process`).  A monitor in this process listens to the graph
+(odometry, steering, plans, blends, threats, diagnostics) and builds the same summary as
+``moose simulate``; it runs on the nodes' runtime when this interpreter can run it, else (and for a
+mixed graph) on Cyclone DDS, which then needs discovery settings that match the nodes' (README).
 The run ends when the simulator finishes (or, without a simulator, after ``duration``);
 Ctrl-C / SIGTERM stop every child (SIGTERM, then SIGKILL after a grace period).
 With ``bag`` set, every topic of the graph is recorded into that bag directory.
@@ -13,13 +18,12 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import os
 import signal
 import subprocess
 import sys
 import threading
 import time
-from typing import Any, Optional
+from typing import Any, Mapping, Optional, Union
 
 import numpy as np
 
@@ -37,7 +41,7 @@ from .bag import Recorder
 from .bag.params import RunParameters
 from .graph import BLEND, DIAGNOSTICS, GRAPHS, ODOM, PLAN_MPC, STEERING, THREAT
 from .parameters import check_parameter_file, node_parameters, parameter_names
-from .runtime import DdsNode
+from .runtime import create_node, process, rclpy_missing
 from .runtime.base import set_dotted
 
 
@@ -58,7 +62,7 @@ class Monitor:
     invalid: int = 0
     """Invalid plans and threats dropped (moose_ros.convert validates them)."""
 
-    def attach(self, node: DdsNode) -> None:  # a tool that must not miss a sample (graph.Topic.tool_qos)
+    def attach(self, node: Any) -> None:  # a tool that must not miss a sample (graph.Topic.tool_qos)
         ODOM.tool_subscription(node, self.on_odom)
         STEERING.tool_subscription(node, lambda m: setattr(self, "delta", m.delta))
         PLAN_MPC.tool_subscription(node, self.on_mpc)
@@ -170,8 +174,12 @@ def launch(
     out=sys.stdout,
     bag: Optional[Any] = None,
     foxglove: Optional[tuple[str, int]] = None,
+    runtime: Union[None, str, Mapping[str, str]] = None,
 ) -> dict[str, Any]:
-    """Run the graph once and return the summary (plus ``node_exits`` and ``diagnostics``).
+    """Run the graph once and return the summary (plus ``node_exits``, ``diagnostics`` and ``runtime``:
+    what each node and the monitor ran on).
+
+    ``runtime``: ``rclpy`` or ``dds`` for every node, or ``{node: runtime}`` (others: the default).
 
     ``params``: node parameters (``scenario`` or the ad-hoc ``speed``/``tau``/…, ``can_interface``, …) given
     to every node that takes them; see :func:`node_overrides`.  ``foxglove``: (host, port) of a live view
@@ -180,8 +188,12 @@ def launch(
     if scenario.mu is not None:  # the road of this run, for every node: one friction in the whole graph
         params = {"vehicle.mu": scenario.mu, **params}
     overrides = node_overrides(graph, planner, params, params_file, seed, rate)
+    children = {name: process(runtime.get(name) if isinstance(runtime, Mapping) else runtime) for name in overrides}
+    runtimes = {name: env["MOOSE_RUNTIME"] for name, (_python, env) in children.items()}
+    # the monitor: on the nodes' runtime when this interpreter can run it, else (and for a mixed graph) on Cyclone
+    runtimes["moose_monitor"] = "rclpy" if set(runtimes.values()) == {"rclpy"} and not rclpy_missing() else "dds"
     monitor = Monitor(scenario, scenario.configure(load_config(params_file)))
-    node = DdsNode("moose_monitor", overrides={"use_sim_time": False})
+    node = create_node("moose_monitor", overrides={"use_sim_time": False}, runtime=runtimes["moose_monitor"])
     monitor.attach(node)
     recorder = live = None
     try:
@@ -208,12 +220,13 @@ def launch(
                 out.flush()
 
     for name, given in overrides.items():
-        cmd = [sys.executable, "-m", "moose_ros.nodes", name]
+        python, env = children[name]
+        cmd = [python, "-m", "moose_ros.nodes", name]
         if params_file:
             cmd += ["--params", params_file]
         for key, value in given.items():
             cmd += ["--param", f"{key}={json.dumps(value)}"]
-        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=os.environ.copy())
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
         procs[name] = proc
         threading.Thread(target=stream, args=(name, proc), daemon=True).start()
 
@@ -265,5 +278,6 @@ def launch(
     summary["diagnostics"] = {k: {"level": v[0], "message": v[1]} for k, v in monitor.diagnostics.items()}
     summary["odom_samples"] = len(monitor.odom)
     summary["invalid_messages"] = monitor.invalid
+    summary["runtime"] = runtimes
     return summary
 

@@ -41,6 +41,7 @@ class LiveView:
         self.port = self.server.port
         self.host = host
         self._channels: dict[str, Any] = {}
+        self._serialize = node.serialize  # the runtime's CDR (Cyclone or rclpy)
         for topic in TOPICS.values():
             msgdef, _ = typestore().generate_msgdef(topic.type, ros_version=2)
             schema = foxglove.Schema(name=topic.type, encoding="ros2msg", data=msgdef.encode())
@@ -49,11 +50,11 @@ class LiveView:
             topic.tool_subscription(node, self._forward(topic))
 
     def _forward(self, topic: Topic) -> Callable[[Any], None]:
-        channel = self._channels[topic.name]
+        channel, serialize = self._channels[topic.name], self._serialize
         is_clock = topic.name == CLOCK.name
 
         def forward(msg: Any) -> None:
-            channel.log(bytes(msg.serialize()), log_time=time.time_ns())
+            channel.log(serialize(msg), log_time=time.time_ns())
             if is_clock:
                 self.server.broadcast_time(msg.clock.sec * 1_000_000_000 + msg.clock.nanosec)
 

@@ -31,16 +31,17 @@ class Recorder:
         if unknown:
             raise BagError(f"--topics {unknown[0]!r} is not a topic of the graph; topics: {', '.join(TOPICS)}")
         self.writer = BagWriter(path, custom_data=parameters.as_strings() if parameters is not None else None)
+        self._serialize = node.serialize  # the runtime's CDR: the same bytes on both runtimes
         self._last_ns = 0
         for topic in chosen:
             TOPICS[topic].tool_subscription(node, self._callback(topic))
 
     def _callback(self, topic: str) -> Callable[[Any], None]:
-        type_name = TOPICS[topic].type
+        type_name, serialize = TOPICS[topic].type, self._serialize
 
         def record(msg: Any) -> None:
             self._last_ns = max(time.time_ns(), self._last_ns)
-            self.writer.write(topic, type_name, self._last_ns, bytes(msg.serialize()))
+            self.writer.write(topic, type_name, self._last_ns, serialize(msg))
 
         return record
 

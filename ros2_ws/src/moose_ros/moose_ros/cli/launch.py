@@ -14,6 +14,7 @@ from moose.params import ParamError
 
 from ..graph import GRAPHS
 from ..live import DEFAULT_HOST, DEFAULT_PORT
+from ..runtime import RUNTIMES
 
 
 def add_subparser(subparsers: Any) -> None:
@@ -24,6 +25,9 @@ def add_subparser(subparsers: Any) -> None:
     launch.add_argument("--can-channel", help="multicast group (default: moose.canbus.bus.DEFAULT_GROUP) / socketcan device")
     launch.add_argument("--can-port", type=int, help="UDP port of udp_multicast (default: moose.canbus.bus.DEFAULT_PORT)")
     add_scenario_arguments(launch)
+    launch.add_argument("--runtime", choices=RUNTIMES,
+                        help="what the nodes run on: rclpy (ROS 2; the interpreter of .venv-ros when this one has no "
+                             "rclpy) or dds (Cyclone DDS); default: MOOSE_RUNTIME, else rclpy when importable here")
     launch.add_argument("--rate", type=positive_float, default=1.0, help="simulated seconds per wall-clock second")
     launch.add_argument("--json", help="write the summary as JSON to this path")
     launch.add_argument("--bag", help="record every topic into this bag directory (default: a new folder under runs/)")
@@ -53,12 +57,13 @@ def cmd_launch(args: argparse.Namespace) -> int:
                                     else run_folder(scenario.name, planner) / "bag")
     try:
         summary = launch(scenario, params, graph=args.graph, planner=planner, seed=args.seed, params_file=args.config,
-                         rate=args.rate, bag=bag,
+                         rate=args.rate, bag=bag, runtime=args.runtime,
                          foxglove=(args.foxglove_host, args.foxglove) if args.foxglove is not None else None)
     except BagError as exc:
         raise ParamError(str(exc)) from None
     print(format_summary(summary))
     print(f"node exits      {summary['node_exits']}")
+    print(f"runtime         {', '.join(f'{name} {rt}' for name, rt in summary['runtime'].items())}")
     if bag is not None:
         print(f"bag             {bag}")
     if json_path is not None:

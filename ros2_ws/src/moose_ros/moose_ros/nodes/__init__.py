@@ -45,12 +45,18 @@ def parse_overrides(items: Sequence[str]) -> dict[str, Any]:
 def run(name: str, argv: Sequence[str] = ()) -> int:
     """Start node ``name`` and spin it until shutdown; returns the exit status."""
     from ..parameters import check_parameter_file
-    from ..runtime import create_node
+    from ..runtime import backend, create_node
 
-    parser = argparse.ArgumentParser(prog=f"moose node {name}")
+    parser = argparse.ArgumentParser(prog=f"moose node {name}", epilog="On rclpy, --ros-args and what follows are "
+                                     "ROS 2's (ros2 run and ros2 launch pass remappings and parameters so).")
     parser.add_argument("--params", help="ROS 2 parameter file")
     parser.add_argument("--param", action="append", default=[], help="parameter override key=value")
-    args, _ros_args = parser.parse_known_args(list(argv))
+    argv = list(argv)
+    ros_args = argv[argv.index("--ros-args"):] if "--ros-args" in argv else []
+    args = parser.parse_args(argv[:len(argv) - len(ros_args)])  # a misspelt option is an error, not ignored
+    if ros_args and backend() != "rclpy":  # rcl reads them (rclpy.init); on Cyclone they would be ignored
+        raise ParamError(f"{' '.join(ros_args)}: --ros-args are read by rclpy only, and this node would run on "
+                         "Cyclone DDS (MOOSE_RUNTIME=dds, or no rclpy here); use --params FILE and --param key=value")
     cls = node_class(name)
     if args.params:
         check_parameter_file(args.params)

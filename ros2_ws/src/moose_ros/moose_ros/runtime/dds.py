@@ -353,6 +353,11 @@ class DdsNode(NodeBase):
 
         return make(type_name, **fields)
 
+    @staticmethod
+    def serialize(msg: Any) -> bytes:
+        """The message's CDR (XCDR1 with its encapsulation header), as rosbag2 stores it."""
+        return bytes(msg.serialize())
+
     # -- executor --------------------------------------------------------------------
     def _wait_time(self, limit: float) -> float:
         if self.use_sim_time:

@@ -1,5 +1,15 @@
-"""The rclpy backend: the runtime's node API on a real ROS 2 node (generated message classes, rclpy's
-SingleThreadedExecutor, parameters visible to ``ros2 param``).
+"""The rclpy backend: the runtime's node API on a real ROS 2 node (generated message classes, parameters
+visible to ``ros2 param`` and its ``rcl_interfaces`` services, rclpy's time source).
+
+The executor is a single thread that behaves like the DDS backend's (:mod:`.dds`): each turn waits
+for work with rclpy's executor, then takes every message that is ready on every subscription of the
+node (rclpy's time source's ``/clock`` reader included) and runs their callbacks in publication
+order (source timestamps), not in rclpy's order (one message per subscription and wait, in the
+order the subscriptions were created).  A node that fuses several topics, such as the observer,
+therefore sees its samples in the order they were sent on both runtimes, and ``now()`` in a callback
+is the simulated time of the last ``/clock`` published before that message.  Timers are rclpy's
+(on the node's clock, so simulated time is honoured); one that is due runs after the messages
+taken before it.
 
 Discovery is ROS 2's own (``ROS_AUTOMATIC_DISCOVERY_RANGE``, ``ROS_STATIC_PEERS``), with this project's
 default: before the node initialises rclpy it sets the variables of :meth:`.discovery.Discovery.ros_environment`
@@ -7,6 +17,7 @@ default: before the node initialises rclpy it sets the variables of :meth:`.disc
 so a node started by ``ros2 run``/``ros2 launch`` stays on this host unless the user opts in."""
 from __future__ import annotations
 
+import itertools
 import os
 import time
 from typing import Any, Callable, Optional
@@ -15,7 +26,12 @@ from moose.params import ParamError
 
 from .base import Handle, NodeBase, Publisher, check_period, flatten_params, set_dotted
 from .discovery import Discovery
-from .qos import QOS_DEFAULT, Qos
+from .names import CLOCK_TOPIC, CLOCK_TYPE
+from .qos import QOS_CLOCK_READER, QOS_DEFAULT, Qos
+
+MAX_TAKE = 64
+"""Messages taken from one subscription per executor turn at most, as the DDS executor takes at most
+``max(depth, 64)`` samples per reader and turn (keep-last depths bound it first)."""
 
 
 class RclpyNode(NodeBase):
@@ -50,8 +66,15 @@ class RclpyNode(NodeBase):
         for dotted, parameter in self.node.get_parameters_by_prefix("").items():
             set_dotted(self._params, dotted, parameter.value)
         self.use_sim_time = bool(self.node.get_parameter("use_sim_time").value)
+        if self.use_sim_time:  # rclpy's time source reads /clock with this QoS (as the DDS backend's reader)
+            self._track("subscription", CLOCK_TOPIC, CLOCK_TYPE, QOS_CLOCK_READER)
         self._executor = SingleThreadedExecutor()
         self._executor.add_node(self.node)
+        self._pending: list[tuple[int, int, int, Callable[[Any], None], Any]] = []
+        self._indices = itertools.count()  # of the subscriptions, in the order they were queued (created)
+        self._sequence = itertools.count()
+        self._worked = False
+        self._condition = lambda: self._worked  # one object: rclpy compares the wait's arguments
 
     @staticmethod
     def _class(type_name: str) -> Any:
@@ -130,6 +153,13 @@ class RclpyNode(NodeBase):
             setattr(msg, key, value)
         return msg
 
+    @staticmethod
+    def serialize(msg: Any) -> bytes:
+        """The message's CDR with its encapsulation header, as rosbag2 stores it (rmw's serialisation)."""
+        from rclpy.serialization import serialize_message
+
+        return bytes(serialize_message(msg))
+
     def log_info(self, text: str) -> None:
         self.node.get_logger().info(text)
 
@@ -139,25 +169,89 @@ class RclpyNode(NodeBase):
     def log_error(self, text: str) -> None:
         self.node.get_logger().error(text)
 
+    # -- executor --------------------------------------------------------------------
+    def _queue_subscriptions(self) -> None:
+        """Give every subscription of the node not seen yet a callback that queues its message, and
+        every other message the subscription holds, with their source timestamps (the original
+        callback runs in :meth:`_flush`)."""
+        for sub in self.node.subscriptions:
+            if getattr(sub.callback, "queues_for", None) is self:
+                continue
+            index = next(self._indices)
+
+            def queue(msg: Any, info: dict, sub: Any = sub, callback: Callable[[Any], None] = sub.callback,
+                      index: int = index) -> None:
+                for _ in range(MAX_TAKE):
+                    self._pending.append((int(info["source_timestamp"]), index, next(self._sequence), callback, msg))
+                    with sub.handle:  # what rclpy's executor does to take one message
+                        taken = sub.handle.take_message(sub.msg_type, sub.raw)
+                    if taken is None:
+                        break
+                    msg, info = taken
+
+            queue.queues_for = self  # type: ignore[attr-defined]
+            sub.callback = queue  # two parameters: rclpy passes the message info
+
+    def _flush(self) -> None:
+        """Run the queued messages' callbacks in publication order (source timestamp, then subscription)."""
+        batch, self._pending = sorted(self._pending, key=lambda item: item[:3]), []
+        for _stamp, _index, _seq, callback, msg in batch:
+            if self._stop.is_set():
+                return
+            callback(msg)
+
+    def _turn(self, timeout: float) -> None:
+        """Wait up to ``timeout`` s for work, run what that one wait found ready (subscriptions queue
+        their messages; a timer runs after the messages queued before it), then the queued messages
+        in publication order."""
+        from rclpy.executors import ConditionReachedException, ShutdownException, TimeoutException
+        from rclpy.timer import Timer
+
+        self._queue_subscriptions()
+        self._worked = False
+        while not self._stop.is_set():
+            try:  # the same arguments each call: rclpy goes on through one wait's ready entities, and
+                # once they are done the condition (work was done) ends the turn instead of a new wait
+                handler, entity, _node = self._executor.wait_for_ready_callbacks(timeout, None, self._condition)
+            except (TimeoutException, ConditionReachedException, ShutdownException):
+                break
+            self._worked = True
+            if isinstance(entity, Timer):
+                self._flush()
+            handler()
+            if handler.exception() is not None:
+                raise handler.exception()
+        self._flush()
+
     def spin_once(self, timeout: float) -> None:
         """Run callbacks and timers for ``timeout`` seconds (returns early on ``shutdown``)."""
+        from rclpy.executors import ExternalShutdownException
+
         deadline = time.monotonic() + timeout
         with self._running():
-            while not self._stop.is_set() and self._rclpy.ok():
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    break
-                self._executor.spin_once(timeout_sec=min(remaining, 0.1))
+            try:
+                while not self._stop.is_set() and self._rclpy.ok():
+                    remaining = deadline - time.monotonic()
+                    if remaining <= 0:
+                        break
+                    self._turn(min(remaining, 0.1))
+            except ExternalShutdownException:
+                pass
 
     def spin(self, until: Optional[Callable[[], bool]] = None) -> None:
+        """Run callbacks and timers until ``shutdown()``, the end of the rclpy context (Ctrl-C) or
+        ``until()`` is true (checked at least every 0.1 s)."""
         from rclpy.executors import ExternalShutdownException
 
         with self._running():
             try:
                 while self._rclpy.ok() and not self._stop.is_set() and not (until and until()):
-                    self._executor.spin_once(timeout_sec=0.1)
+                    self._turn(0.1)
             except ExternalShutdownException:
                 pass
+
+    def _wake(self) -> None:
+        self._executor.wake()
 
     def _release(self) -> None:
         """Destroy the node and its executor (and the rclpy context if this node created it)."""
