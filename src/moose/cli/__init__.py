@@ -16,7 +16,7 @@ from typing import Callable, Sequence
 
 from ..params import ParamError
 from . import can, reproduce, simulate
-from .common import DEFAULT_SCENARIO, EXIT_BAD_INPUT, EXIT_INTERRUPTED
+from .common import DEFAULT_SCENARIO, EXIT_BAD_INPUT, EXIT_INTERRUPTED, INTERRUPTS
 from .plugins import add_plugin_commands
 
 __all__ = ["DEFAULT_SCENARIO", "build_parser", "main"]
@@ -34,12 +34,26 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _interrupted(exc: BaseException) -> bool:
+    """Whether ``exc`` was caused by a KeyboardInterrupt (somewhere down its chain)."""
+    seen: set[int] = set()
+    cause: BaseException | None = exc
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, KeyboardInterrupt):
+            return True
+        seen.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
+    return False
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    INTERRUPTS.install()
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
         handler: Callable[[argparse.Namespace], int] = args.func
         status = handler(args)
+        INTERRUPTS.check()  # a Ctrl-C that a C extension swallowed still ends the command with 130
         sys.stdout.flush()  # here, so a closed pipe is handled below and not at exit
         return status
     except ParamError as exc:
@@ -47,6 +61,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         return EXIT_INTERRUPTED
+    except SystemError as exc:  # Ctrl-C inside a C extension (CasADi) surfaces as "returned a result with an
+        if _interrupted(exc):   # exception set", the KeyboardInterrupt as its cause
+            return EXIT_INTERRUPTED
+        raise
     except BrokenPipeError:  # the reader of our output went away (`moose bag info … | head`): not an error of ours
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 128 + signal.SIGPIPE
+    finally:
+        INTERRUPTS.uninstall()

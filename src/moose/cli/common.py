@@ -31,6 +31,46 @@ OUTCOME_EXIT: dict[str, int] = {"clear": EXIT_CLEAR, "collision": EXIT_FAILED, "
 """The exit status of each outcome of :data:`moose.verdict.OUTCOMES` (``moose simulate``, ``moose launch``)."""
 
 
+class Interrupts:
+    """Ctrl-C that cannot be lost.  Python raises KeyboardInterrupt wherever the main thread is; inside a C
+    extension's call (CasADi's ``__array__`` under ``numpy.asarray``) it can surface as a SystemError or be
+    swallowed, and the run went on to print a verdict and exit 0.  While installed, every SIGINT is also
+    remembered, and :meth:`check` raises it again before anything claims to be a complete result."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self._previous: Any = None
+
+    def _on_sigint(self, signum: int, frame: Any) -> None:
+        self.count += 1
+        raise KeyboardInterrupt
+
+    def install(self) -> None:
+        """Take SIGINT over when it has Python's default handler (not when the parent ignores it)."""
+        import signal
+        import threading
+
+        if threading.current_thread() is threading.main_thread() and \
+                signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            self._previous = signal.signal(signal.SIGINT, self._on_sigint)
+
+    def uninstall(self) -> None:
+        import signal
+
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+            self._previous = None
+
+    def check(self) -> None:
+        """KeyboardInterrupt if Ctrl-C came since :meth:`install`, even if something swallowed it."""
+        if self.count:
+            raise KeyboardInterrupt
+
+
+INTERRUPTS = Interrupts()
+"""The ``moose`` command's (installed by :func:`moose.cli.main`)."""
+
+
 def outcome_exit_status(outcome: str) -> int:
     """The exit status of a run with ``outcome`` (:data:`OUTCOME_EXIT`)."""
     return OUTCOME_EXIT[outcome]

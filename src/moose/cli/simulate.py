@@ -17,7 +17,7 @@ from typing import Any, Callable, Optional
 
 from ..params import ParamError
 from .common import (
-    add_scenario_arguments, check_output_dir, check_output_file, configure, outcome_exit_status, plot_suffixes,
+    INTERRUPTS, add_scenario_arguments, check_output_dir, check_output_file, configure, outcome_exit_status, plot_suffixes,
     run_folder, scenario_from_args,
 )
 from .plugins import recorder
@@ -85,6 +85,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     plot_path = check_output_file("--plot", args.plot, plot_suffixes()) if args.plot is not None else None
     bag_path = check_output_dir("--bag", args.bag) if record is not None else None
     result = simulate(config, scenario, planner=args.planner, seed=args.seed)
+    INTERRUPTS.check()  # an interrupted run is not reported as one that ended
     summary = summarize(result)
     print(format_summary(summary))
     if json_path is not None:
