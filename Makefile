@@ -9,7 +9,7 @@ STAMP  := $(VENV)/.installed
 
 $(STAMP): pyproject.toml ros2_ws/src/moose_ros/setup.py
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet -e '.[test]' -e 'ros2_ws/src/moose_ros[parquet]'
+	$(BIN)/python -m pip install --quiet -e '.[test,sweep,dask]' -e 'ros2_ws/src/moose_ros[parquet]'
 	touch $(STAMP)
 
 run: $(STAMP)

@@ -1,7 +1,7 @@
 """The ``moose`` command: built-in commands, and commands of installed plugins.
 
-Built in: ``simulate`` (one moose test in lockstep, :mod:`.simulate`) and ``can`` (vehicle-bus
-tools, :mod:`.can`).  Other packages add commands through entry points (:mod:`.plugins`); the
+Built in: ``simulate`` (one moose test in lockstep, :mod:`.simulate`), ``can`` (vehicle-bus
+tools, :mod:`.can`) and ``sweep`` (many moose tests and their maps, :mod:`.sweep`).  Other packages add commands through entry points (:mod:`.plugins`); the
 node graph's ``node``, ``launch`` and ``bag`` come with moose_ros.  Bad input ends with
 ``moose: error: …`` naming the field and the value, and a non-zero exit status.
 """
@@ -12,7 +12,7 @@ import sys
 from typing import Callable, Sequence
 
 from ..params import ParamError
-from . import can, simulate
+from . import can, simulate, sweep
 from .common import DEFAULT_SCENARIO
 from .plugins import add_plugin_commands
 
@@ -26,6 +26,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     simulate.add_subparser(sub)
     can.add_subparser(sub)
+    sweep.add_subparser(sub)
     add_plugin_commands(sub)
     return parser
 
