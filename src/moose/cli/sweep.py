@@ -58,6 +58,8 @@ def add_subparser(subparsers: Any) -> None:
                      help="local worker processes (default) or an existing Dask cluster (--address)")
     run.add_argument("--workers", type=int, help="local worker processes (default: the number of cores)")
     run.add_argument("--address", help="Dask scheduler, tcp://host:8786")
+    run.add_argument("--connect-timeout", type=positive_float, default=10.0,
+                     help="seconds to wait for the Dask scheduler and a first worker (default 10)")
     run.add_argument("--timeout", type=positive_float, default=300.0,
                      help="time limit of one case, s (default 300); a case over it is recorded as timeout")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -70,6 +72,7 @@ def add_subparser(subparsers: Any) -> None:
 
 def _axes(args: argparse.Namespace) -> list[Any]:
     from ..sweep.axes import Axis, parse_axis
+    from ..sweep.spec import FLAGS
 
     axes = []
     for name, text in (("speed", args.speed), ("tau", args.tau), ("half_width", args.obstacle_half_width),
@@ -77,7 +80,7 @@ def _axes(args: argparse.Namespace) -> list[Any]:
                        ("length", args.obstacle_length), ("duration", args.duration),
                        ("field_margin", args.field_margin)):
         if text is not None:
-            axes.append(parse_axis(name, text))
+            axes.append(parse_axis(name, text, FLAGS[name]))
     if args.seeds < 1:
         raise ParamError(f"--seeds {args.seeds!r} is invalid: expected at least 1 seed")
     axes.append(Axis("seed", tuple(range(args.seeds))))
@@ -90,7 +93,7 @@ def _axes(args: argparse.Namespace) -> list[Any]:
         if key in keys:
             raise ParamError(f"--set {key} is given twice")
         keys.add(key)
-        axes.append(parse_axis(f"set.{key}", values))
+        axes.append(parse_axis(f"set.{key}", values, f"--set {key}"))
     return axes
 
 
@@ -116,7 +119,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             raise ParamError("--backend dask needs --address tcp://HOST:PORT of the scheduler")
         if args.workers is not None:
             raise ParamError("--workers is for the local backend; a Dask cluster has its own workers")
-        backend: Any = DaskBackend(spec.config, args.address, args.timeout)
+        backend: Any = DaskBackend(spec.config, args.address, args.timeout, args.connect_timeout)
     else:
         if args.address:
             raise ParamError("--address is for --backend dask")

@@ -69,8 +69,10 @@ def _number(text: str, name: str) -> float:
     return value
 
 
-def parse_axis(name: str, text: str) -> Axis:
-    """``text`` of the command line as an :class:`Axis` (errors name the axis and the text)."""
+def parse_axis(name: str, text: str, label: Optional[str] = None) -> Axis:
+    """``text`` of the command line as an :class:`Axis`; errors name ``label`` (the flag, default ``name``)
+    and the text."""
+    axis_name, name = name, label or name
     text = text.strip()
     if not text:
         raise ParamError(f"{name} = {text!r} is invalid: the axis has no values")
@@ -82,7 +84,7 @@ def parse_axis(name: str, text: str) -> Axis:
         if not low <= high:
             raise ParamError(f"{name} = {text!r} is an invalid range: LO = {low!r} is above HI = {high!r}")
         if len(parts) == 2:
-            return Axis(name, low=float(low), high=float(high))
+            return Axis(axis_name, low=float(low), high=float(high))
         step = _number(parts[2], name)
         if not step > 0:
             raise ParamError(f"{name} = {text!r} is an invalid range: STEP = {step!r} must be positive")
@@ -91,13 +93,13 @@ def parse_axis(name: str, text: str) -> Axis:
             raise ParamError(f"{name} = {text!r} is an invalid range: {count} values")
         integral = all(isinstance(v, int) for v in (low, high, step))
         values = [low + k * step if integral else round(low + k * step, 12) for k in range(count)]
-        return Axis(name, tuple(values))
+        return Axis(axis_name, tuple(values))
     values = tuple(_scalar(part.strip(), name) for part in text.split(","))
     if any(v == "" for v in values):
         raise ParamError(f"{name} = {text!r} is invalid: an empty value in the list")
     if len(set(map(repr, values))) != len(values):
         raise ParamError(f"{name} = {text!r} is invalid: a value is listed twice")
-    return Axis(name, values)
+    return Axis(axis_name, values)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -195,7 +195,7 @@ class DaskBackend:
                                   key=[f"moose-case-{c.id}-{token}" for c in cases], pure=False)
         by_key = {f.key: c for f, c in zip(futures, cases)}
         try:
-            for future in as_completed(futures):
+            for future in as_completed(futures, loop=self.client.loop):
                 case = by_key[future.key]
                 try:
                     row = future.result()
