@@ -106,7 +106,7 @@ class ClosedLoop:
         dt_motion = 1.0 / sim.motion_rate_hz
         end_time = self.scenario.lead_time + self.scenario.duration
         n_motion = int(round(end_time * sim.motion_rate_hz))
-        trace = np.full((n_motion + 1, len(TRACE_FIELDS)), np.nan)
+        rows: list[tuple[float, ...]] = []
         planning: list[PlanningRecord] = []
         appeared = False
         first_threat: Optional[Threat] = None
@@ -149,13 +149,14 @@ class ClosedLoop:
                 reference = self.step.reference_between(estimate) or reference
                 row.delta_ref = reference.delta
             u = self.motion.step(reference, estimate, delta_meas, dt_motion)
-            trace[k] = (
-                t, *state[:6], state[8], state[6], state[7],
+            rows.append((
+                t, *state[:6].tolist(), state[8], state[6], state[7],
                 estimate.x, estimate.y, estimate.theta, estimate.vx, estimate.vy, estimate.gamma,
-                row.delta_ref, row.delta_mpc, row.vx_ref, row.weight_mpc, *u, float(threat is not None),
-            )
+                row.delta_ref, row.delta_mpc, row.vx_ref, row.weight_mpc, *u.tolist(), float(threat is not None),
+            ))
             if k < n_motion:
                 self.plant.step(u, sim.plant_steps_per_motion)
+        trace = np.array(rows, dtype=float)
         columns = {name: trace[:, i].copy() for i, name in enumerate(TRACE_FIELDS)}
         return SimulationResult(self.scenario, self.mode, self.seed, columns, planning, first_threat,
                                 self.config, end_time,
