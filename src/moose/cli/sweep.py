@@ -97,9 +97,19 @@ def _axes(args: argparse.Namespace) -> list[Any]:
     return axes
 
 
+AXIS_OPTIONS = ("speed", "tau", "obstacle_half_width", "nu", "mu", "planner", "obstacle_length", "duration",
+                "field_margin", "samples", "output", "config", "address", "workers")
+
+
 def cmd_sweep(args: argparse.Namespace) -> int:
     if args.action == "plot":
+        given = [name for name in AXIS_OPTIONS if getattr(args, name) is not None] + (["set"] if args.set else [])
+        if given:
+            flag = "--" + given[0].replace("_", "-")
+            raise ParamError(f"{flag} is an option of the sweep, not of 'moose sweep plot DIR' (--x, --y, --plot-output)")
         return cmd_plot(args)
+    if args.x is not None or args.y is not None or args.plot_output is not None:
+        raise ParamError("--x, --y and --plot-output are options of 'moose sweep plot DIR'")
     if args.folder is not None:
         raise ParamError(f"{args.folder!r}: the sweep's folder is -o DIR ('moose sweep plot DIR' draws one)")
     from ..config import load_config

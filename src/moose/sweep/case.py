@@ -6,7 +6,8 @@ A case runs exactly what ``moose simulate`` runs for the same inputs
 :func:`moose.scenario.adhoc_scenario`, the same :func:`moose.simulation.simulate` and
 :func:`moose.metrics.summarize`.  The row is the case's inputs (``input.*``, ``set.*``), the whole
 summary (nested fields flattened with dots, ``mpc_solve_ms.median``; the status counts and notes
-as JSON text), and how the case ran: ``status`` (:data:`STATUSES`), ``error``, ``wall_s``, ``worker``.
+as JSON text), and how the case ran: ``status`` (:data:`STATUSES`), ``error``, ``wall_s``, ``worker``
+(host:pid) and ``worker_max_rss_mb`` (the worker's peak resident memory so far).
 
 A case that raises is recorded with its traceback; one that runs longer than its time limit is
 stopped by an exception raised in its thread (:class:`CaseTimeout`), so a case never takes its
@@ -34,7 +35,8 @@ STATUSES: tuple[Status, ...] = ("done", "error", "timeout", "crashed")
 """``done``: the run finished and was judged (its ``outcome`` says how it went); ``error``: the case
 raised; ``timeout``: it ran past its time limit; ``crashed``: its worker process died under it."""
 
-TIMING_COLUMNS = ("wall_s", "worker", "mpc_solve_ms.median", "mpc_solve_ms.p95", "mpc_solve_ms.max")
+MACHINE_COLUMNS = ("wall_s", "worker", "worker_max_rss_mb", "mpc_solve_ms.median", "mpc_solve_ms.p95",
+                   "mpc_solve_ms.max")
 """Columns that measure the machine, not the case: they differ between two runs of the same case."""
 
 
@@ -74,6 +76,15 @@ def worker_name() -> str:
     return f"{socket.gethostname()}:{os.getpid()}"
 
 
+def max_rss_mb() -> Optional[float]:
+    """The peak resident memory of this process so far (MB), or None where the platform does not say."""
+    try:
+        import resource
+    except ImportError:
+        return None
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KiB on Linux
+
+
 class _Deadline:
     """Raise :class:`CaseTimeout` in the calling thread after ``seconds`` (at its next Python bytecode)."""
 
@@ -106,7 +117,8 @@ class _Deadline:
 
 def failed_row(case: Case, status: Status, error: str, wall_s: Optional[float], worker: str) -> dict[str, Any]:
     """The row of a case that has no summary."""
-    return {"case_id": case.id, **case.inputs, "status": status, "error": error, "wall_s": wall_s, "worker": worker}
+    return {"case_id": case.id, **case.inputs, "status": status, "error": error, "wall_s": wall_s, "worker": worker,
+            "worker_max_rss_mb": max_rss_mb() if worker == worker_name() else None}
 
 
 def run_case(case: Case, base: Config, timeout: Optional[float] = None) -> dict[str, Any]:
@@ -127,4 +139,4 @@ def run_case(case: Case, base: Config, timeout: Optional[float] = None) -> dict[
         return failed_row(case, "error", traceback.format_exc(), time.perf_counter() - start, worker_name())
     wall = time.perf_counter() - start
     return {"case_id": case.id, **case.inputs, **flatten(summary), "status": "done", "error": None,
-            "wall_s": wall, "worker": worker_name()}
+            "wall_s": wall, "worker": worker_name(), "worker_max_rss_mb": max_rss_mb()}

@@ -36,16 +36,21 @@ RESULTS = "results.parquet"
 def code_version() -> dict[str, str]:
     """The moose version and a hash of its source files: equal hashes, equal code."""
     import hashlib
+    from importlib.metadata import PackageNotFoundError, version
 
     import moose
 
+    try:
+        release = version("moose-avoidance")
+    except PackageNotFoundError:
+        release = "not installed"
     root = Path(moose.__file__).parent
     digest = hashlib.sha256()
     for path in sorted(root.rglob("*")):
         if path.suffix in (".py", ".c", ".yaml", ".dbc") and "__pycache__" not in path.parts:
             digest.update(str(path.relative_to(root)).encode())
             digest.update(path.read_bytes())
-    return {"moose": getattr(moose, "__version__", "unknown"), "source_sha256": digest.hexdigest()[:16]}
+    return {"moose": release, "source_sha256": digest.hexdigest()[:16]}
 
 
 def pyarrow_or_error() -> Any:
