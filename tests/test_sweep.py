@@ -27,7 +27,7 @@ from moose.maneuver import MaxSteeringTable  # noqa: E402
 from moose.paper import PAPER_FRICTION  # noqa: E402
 from moose.params import ParamError, replace  # noqa: E402
 from moose.sweep.axes import parse_axis, unit_samples  # noqa: E402
-from moose.sweep.case import TIMING_COLUMNS  # noqa: E402
+from moose.sweep.case import MACHINE_COLUMNS  # noqa: E402
 from moose.sweep.spec import SweepSpec  # noqa: E402
 from moose.sweep.store import read_results  # noqa: E402
 
@@ -335,7 +335,7 @@ def test_dask_cluster_gives_the_rows_of_the_local_backend(tmp_path: Path) -> Non
         assert len(workers) == 2  # both Dask workers ran cases, none ran in this process
         for key, row in a.items():
             for column, value in row.items():
-                if column not in TIMING_COLUMNS:
+                if column not in MACHINE_COLUMNS:
                     assert b[key][column] == value, (key, column)
         assert json.loads((remote / "manifest.json").read_text())["backend"] == "dask"
     finally:
