@@ -1,4 +1,4 @@
-"""Closed-loop real-time factor: simulated seconds per wall-clock second (target ≥ 50×).
+"""Closed-loop real-time factor: simulated seconds per wall-clock second on one core (target ≥ 200×, issue 12).
 
 The baseline is the simulated time itself (real time = 1×), measured in the
 same run; the MSF-only run is printed too, to show what the MPC costs.
