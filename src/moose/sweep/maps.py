@@ -52,6 +52,8 @@ ADVANTAGE = (
 """Classes of the advantage map: combined safe and both / MPC / MSF alone not; all three safe; the combined
 planner unsafe where another is safe; no planner safe."""
 FACETS_PER_FIGURE = 6
+MAX_FACET_VALUES = 12
+"""An axis with more distinct values (a sampled one) is not split into panel columns."""
 
 
 def _label(row: dict[str, Any]) -> str:
@@ -108,8 +110,12 @@ class Cells:
 
     def __init__(self, rows: Sequence[dict[str, Any]], x: str, y: Optional[str]) -> None:
         self.x, self.y = x, y
-        varied = _varied(rows)
-        self.facet_axes = [n for n in varied if n not in (x, y) and not (n == "half_width" and "nu" in (x, y))]
+        varied = [n for n in _varied(rows) if n not in (x, y) and not (n == "half_width" and "nu" in (x, y))]
+        distinct = {n: len({json.dumps(r.get(_column(n)[0])) for r in rows}) for n in varied}
+        self.facet_axes = [n for n in varied if distinct[n] <= MAX_FACET_VALUES]
+        """Axes with a panel column per value."""
+        self.projected = [n for n in varied if distinct[n] > MAX_FACET_VALUES]
+        """Axes with too many values for columns (sampled ones): their points share the panels."""
         self.xcol = _column(x)[0]
         self.ycol = _column(y)[0] if y else None
         self.groups: dict[tuple, dict[tuple[float, float], list[dict[str, Any]]]] = defaultdict(lambda: defaultdict(list))
@@ -268,7 +274,7 @@ def envelope_map(cells: Cells, facets: Sequence[tuple], path: Path, paper: Seque
     from matplotlib.colors import BoundaryNorm, ListedColormap
     from matplotlib.lines import Line2D
 
-    background, bounds = ListedColormap(["#d9d9d9", "#ffffff"]), BoundaryNorm([-0.5, 0.5, 1.5], 2)
+    background, bounds = ListedColormap(["#cfcfcf", "#e5f5e0"]), BoundaryNorm([-0.5, 0.5, 1.5], 2)
     fig, axes = _figure(len(cells.mus), len(facets))
     for i, mu in enumerate(cells.mus):
         for j, facet in enumerate(facets):
@@ -290,7 +296,7 @@ def envelope_map(cells: Cells, facets: Sequence[tuple], path: Path, paper: Seque
     if paper:
         handles.append(Line2D([], [], marker="*", color="gold", markeredgecolor="k", linestyle="", label="paper's experiment"))
     fig.legend(handles=handles, loc="outside lower center", ncol=2, fontsize=8, frameon=False)
-    fig.suptitle("safe envelope (outcome clear for every seed; white: the combined planner's safe cells, grey: not)",
+    fig.suptitle("safe envelope (outcome clear for every seed; pale green: the combined planner's safe cells, grey: not)",
                  fontsize=9)
     return _save(fig, path)
 
@@ -364,7 +370,8 @@ def paper_points(cells: Cells) -> list[dict[str, Any]]:
     from ..paper import PAPER_EXPERIMENTS, PAPER_FRICTION
 
     mus = [mu for mu in cells.mus if abs(mu - PAPER_FRICTION) < 1e-12]
-    if not mus or {cells.x, cells.y} != {"tau", "nu"} or any(n != "speed" for n in cells.facet_axes):
+    if (not mus or {cells.x, cells.y} != {"tau", "nu"} or any(n != "speed" for n in cells.facet_axes)
+            or cells.projected):
         return []
     points = []
     for e in PAPER_EXPERIMENTS:
@@ -450,7 +457,9 @@ def write_report(path: Path, rows: Sequence[dict[str, Any]], cells: Cells, figur
                      f" (seed {esc(str(spec.get('sampling_seed')))}); code {esc(json.dumps(manifest.get('code')))}</p>"
                      f"<p>axes: <code>{esc(axes)}</code></p>")
     parts.append(f"<p>Panels: x = {esc(_column(cells.x)[1])}, y = {esc(_column(cells.y)[1] if cells.y else '-')}; "
-                 f"columns: {esc(', '.join(cells.facet_axes) or 'one')}. A cell aggregates its seeds: the most severe "
+                 f"columns: {esc(', '.join(cells.facet_axes) or 'one')}"
+                 + (f"; sampled axes shown in the same panels: {esc(', '.join(cells.projected))}" if cells.projected else "")
+                 + f". A cell aggregates its seeds: the most severe "
                  "outcome, the smallest clearance; it is safe when every seed is <i>clear</i> (passed the obstacle "
                  "without collision and without loss of control, inside the field).</p>")
     labels = [s for s in SEVERITY if any(_label(r) == s for r in rows)]
