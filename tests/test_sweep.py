@@ -377,3 +377,22 @@ def test_results_and_maps_agree_with_the_journal(tmp_path: Path) -> None:
         assert (maps / name).stat().st_size > 10_000 and f"src='{name}'" in page
     assert "The paper's nine experiments" in page  # τ-ν axes at the paper calibration
     assert main(["sweep", "plot", str(out), "--x", "speed"]) == 2  # speed does not vary here
+
+
+def test_the_core_stays_light_and_a_missing_extra_is_named(tmp_path: Path) -> None:
+    """``moose`` loads no sweep dependency until a sweep runs; without pyarrow the sweep says what to install."""
+    code = ("import sys; from moose.cli import build_parser; build_parser(); "
+            "print(sorted(m for m in ('pyarrow', 'rich', 'dask', 'distributed') if m in sys.modules))")
+    loaded = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert loaded.returncode == 0 and loaded.stdout.strip() == "[]", loaded.stdout + loaded.stderr
+    blocked = ("import sys, importlib.abc\n"
+               "class Block(importlib.abc.MetaPathFinder):\n"
+               "    def find_spec(self, name, path=None, target=None):\n"
+               "        if name.split('.')[0] == 'pyarrow': raise ImportError('no pyarrow here')\n"
+               "sys.meta_path.insert(0, Block())\n"
+               "from moose.cli import main; sys.exit(main(sys.argv[1:]))\n")
+    out = tmp_path / "s"
+    run = subprocess.run([sys.executable, "-c", blocked, "sweep", "--speed", "5", "--tau", "2", "--nu", "0.5",
+                          "-o", str(out)], capture_output=True, text=True, timeout=60)
+    assert run.returncode == 2 and "pip install 'moose-avoidance[sweep]'" in run.stderr, run.stderr
+    assert not out.exists()
