@@ -122,6 +122,10 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     spec = SweepSpec(tuple(_axes(args)), load_config(args.config), samples=args.samples,
                      sampling=args.sampling, sampling_seed=args.sampling_seed)
     cases = spec.cases()
+    short = sum(1 for c in cases if c.duration < c.tau + c.length / c.speed + 0.5)
+    if short:
+        print(f"moose: warning: {short} of {len(cases)} cases end (--duration) less than 0.5 s after a car at "
+              "constant speed would pass the obstacle: they may end stopped_short", file=sys.stderr)
     output = Path(args.output) if args.output else Path("runs") / f"sweep-{time.strftime('%Y%m%d-%H%M%S')}"
     folder = RunFolder.open(output, spec, args.resume)
     if args.backend == "dask":

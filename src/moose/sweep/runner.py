@@ -45,12 +45,10 @@ class Progress:
         if not enabled:
             return
         from rich.console import Console
-        from rich.progress import (BarColumn, MofNCompleteColumn, Progress as RichProgress, TaskProgressColumn,
-                                   TextColumn, TimeElapsedColumn, TimeRemainingColumn)
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress as RichProgress, TextColumn, TimeRemainingColumn
 
         self._progress = RichProgress(
-            TextColumn("sweep"), BarColumn(), MofNCompleteColumn(), TaskProgressColumn(),
-            TextColumn("{task.fields[rate]}"), TextColumn("elapsed"), TimeElapsedColumn(),
+            TextColumn("sweep"), BarColumn(bar_width=24), MofNCompleteColumn(), TextColumn("{task.fields[rate]}"),
             TextColumn("ETA"), TimeRemainingColumn(), TextColumn("{task.fields[outcomes]}"),
             console=Console(stderr=True), refresh_per_second=4)
         self._task = self._progress.add_task("sweep", total=total, completed=done, rate="", outcomes="")
