@@ -122,7 +122,13 @@ class LocalBackend:
                         worker = pool[i] = _Process(self._context, self.base, self.timeout)
                     on_row(row)
                     if queue:
-                        worker.give(queue.pop())
+                        case = queue.pop()
+                        try:
+                            worker.give(case)
+                        except OSError:  # it died between two cases: a new one takes the case
+                            worker.stop(kill=True)
+                            worker = pool[i] = _Process(self._context, self.base, self.timeout)
+                            worker.give(case)
         finally:
             for worker in pool:
                 worker.stop(kill=worker.case is not None)

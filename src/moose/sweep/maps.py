@@ -459,7 +459,7 @@ def write_report(path: Path, rows: Sequence[dict[str, Any]], cells: Cells, figur
     parts.append(f"<p>Panels: x = {esc(_column(cells.x)[1])}, y = {esc(_column(cells.y)[1] if cells.y else '-')}; "
                  f"columns: {esc(', '.join(cells.facet_axes) or 'one')}"
                  + (f"; sampled axes shown in the same panels: {esc(', '.join(cells.projected))}" if cells.projected else "")
-                 + f". A cell aggregates its seeds: the most severe "
+                 + ". A cell aggregates its seeds: the most severe "
                  "outcome, the smallest clearance; it is safe when every seed is <i>clear</i> (passed the obstacle "
                  "without collision and without loss of control, inside the field).</p>")
     labels = [s for s in SEVERITY if any(_label(r) == s for r in rows)]
