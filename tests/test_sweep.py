@@ -308,17 +308,20 @@ def test_dask_cluster_gives_the_rows_of_the_local_backend(tmp_path: Path) -> Non
     pytest.importorskip("distributed")
     dask = Path(sys.executable).with_name("dask")
     scheduler_file = tmp_path / "scheduler.json"
-    env = {**os.environ, "DASK_DISTRIBUTED__WORKER__DAEMON": "False"}
     scheduler = subprocess.Popen([str(dask), "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
                                   "--scheduler-file", str(scheduler_file)], stdout=subprocess.DEVNULL,
-                                 stderr=subprocess.DEVNULL, start_new_session=True, env=env)
+                                 stderr=subprocess.DEVNULL, start_new_session=True)
     worker = None
     try:
         _wait_for(scheduler_file.exists, 60, "the Dask scheduler")
         address = json.loads(scheduler_file.read_text())["address"]
         worker = subprocess.Popen([str(dask), "worker", address, "--nworkers", "2", "--nthreads", "1",
                                    "--no-dashboard", "--host", "127.0.0.1"], stdout=subprocess.DEVNULL,
-                                  stderr=subprocess.DEVNULL, start_new_session=True, env=env)
+                                  stderr=subprocess.DEVNULL, start_new_session=True)
+        from distributed import Client
+
+        with Client(address, timeout="60s") as client:  # both workers up before the sweep starts
+            client.wait_for_workers(2, timeout=120)
         axes = ["sweep", "--speed", "5,7", "--tau", "1.4,2.5", "--nu", "0.4,0.9", "--mu", "paper",
                 "--planner", "combined,mpc", "--duration", "3", "--quiet"]
         local, remote = tmp_path / "local", tmp_path / "dask"
