@@ -30,17 +30,17 @@ def add_subparser(subparsers: Any) -> None:
     sweep.add_argument("action", nargs="?", choices=["plot"], help="plot: draw the maps of the sweep in FOLDER")
     sweep.add_argument("folder", nargs="?", help="(plot) the sweep's folder")
     axes = sweep.add_argument_group("axes")
-    axes.add_argument("--speed", help="speed at detection, m/s")
-    axes.add_argument("--tau", help="time to collision at which the obstacle appears, s")
-    axes.add_argument("--obstacle-half-width", help="danger-zone half width, m (or --nu)")
-    axes.add_argument("--nu", help="target lateral steering index: half width = nu * y_max(tau, v) at the road's mu")
-    axes.add_argument("--mu", help="road friction; 'paper' is the calibration that reproduces the paper's nu "
+    axes.add_argument("--speed", metavar="VALUES", help="speed at detection, m/s")
+    axes.add_argument("--tau", metavar="VALUES", help="time to collision at which the obstacle appears, s")
+    axes.add_argument("--obstacle-half-width", metavar="VALUES", help="danger-zone half width, m (or --nu)")
+    axes.add_argument("--nu", metavar="VALUES", help="target lateral steering index: half width = nu * y_max(tau, v) at the road's mu")
+    axes.add_argument("--mu", metavar="VALUES", help="road friction; 'paper' is the calibration that reproduces the paper's nu "
                                    "(default: the configuration's vehicle.mu)")
-    axes.add_argument("--planner", help="combined, mpc, msf (default combined)")
+    axes.add_argument("--planner", metavar="VALUES", help="combined, mpc, msf (default combined)")
     axes.add_argument("--seeds", type=int, default=1, help="sensor-noise seeds 0..N-1 (default 1)")
-    axes.add_argument("--obstacle-length", help="danger-zone length, m (default 2)")
-    axes.add_argument("--duration", help="simulated seconds after the obstacle appears (default 8)")
-    axes.add_argument("--field-margin", help="room beside the obstacle, m (default 5): the field is "
+    axes.add_argument("--obstacle-length", metavar="VALUES", help="danger-zone length, m (default 2)")
+    axes.add_argument("--duration", metavar="VALUES", help="simulated seconds after the obstacle appears (default 8)")
+    axes.add_argument("--field-margin", metavar="VALUES", help="room beside the obstacle, m (default 5): the field is "
                                              "|y| <= half width + margin, at least the paper's")
     axes.add_argument("--set", action="append", default=[], metavar="GROUP.KEY=VALUES",
                       help="a parameter of config/moose.yaml as an axis, e.g. planning.N_p=10,20 or "
