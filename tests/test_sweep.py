@@ -399,3 +399,16 @@ def test_the_core_stays_light_and_a_missing_extra_is_named(tmp_path: Path) -> No
                           "-o", str(out)], capture_output=True, text=True, timeout=60)
     assert run.returncode == 2 and "pip install 'moose-avoidance[sweep]'" in run.stderr, run.stderr
     assert not out.exists()
+
+
+def test_a_journal_line_cut_by_a_kill_costs_only_that_case(tmp_path: Path) -> None:
+    out = tmp_path / "s"
+    args = ["sweep", "--speed", "5,6", "--tau", "2", "--nu", "0.5", "--planner", "msf", "--duration", "2.5",
+            "-o", str(out), "--workers", "1", "--quiet"]
+    assert main(args) == 0
+    lines = (out / "cases.jsonl").read_text().splitlines()
+    (out / "cases.jsonl").write_text(lines[0] + "\n" + lines[1][: len(lines[1]) // 2])  # as a SIGKILL mid-write leaves it
+    assert main(args + ["--resume"]) == 0  # reruns the cut case only
+    rows = rows_of(out)
+    assert len(rows) == 2 and {r["case_id"] for r in rows} == {json.loads(line)["case_id"] for line in lines}
+    assert json.loads((out / "cases.jsonl").read_text().splitlines()[0]) == json.loads(lines[0])

@@ -150,7 +150,11 @@ class RunFolder:
         """Record one finished case (flushed to the operating system at once)."""
         if self._journal is None:
             self.path.mkdir(parents=True, exist_ok=True)
-            self._journal = open(self.path / JOURNAL, "a", encoding="utf-8")
+            path = self.path / JOURNAL
+            cut = path.exists() and path.stat().st_size > 0 and not path.read_bytes().endswith(b"\n")
+            self._journal = open(path, "a", encoding="utf-8")
+            if cut:  # a line cut short by a kill: end it, so that the next row starts a line of its own
+                self._journal.write("\n")
         self._journal.write(json.dumps(row, allow_nan=False) + "\n")
         self._journal.flush()
 
