@@ -121,6 +121,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     pyarrow_or_error()
     spec = SweepSpec(tuple(_axes(args)), load_config(args.config), samples=args.samples,
                      sampling=args.sampling, sampling_seed=args.sampling_seed)
+    if args.mu is not None and ":" in args.mu and args.mu.count(":") == 1:
+        print("moose: warning: a sampled --mu builds a maneuver table (about 0.4 s) for every distinct mu, in this "
+              "process for --nu and in every worker; a list of frictions is much faster", file=sys.stderr)
     cases = spec.cases()
     short = sum(1 for c in cases if c.duration < c.tau + c.length / c.speed + 0.5)
     if short:
