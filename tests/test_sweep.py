@@ -137,7 +137,7 @@ def test_an_unreachable_cluster_is_refused_before_any_case(tmp_path: Path, capsy
         held.bind(("127.0.0.1", 0))
         address = f"tcp://127.0.0.1:{held.getsockname()[1]}"
         start = time.monotonic()
-        code = main(BASE + ["-o", str(tmp_path / "s"), "--backend", "dask", "--address", address,
+        code = main(BASE + ["-o", str(tmp_path / "s"), "--address", address,
                             "--connect-timeout", "2"])
         assert time.monotonic() - start < 30
     err = capsys.readouterr().err
@@ -327,7 +327,7 @@ def test_dask_cluster_gives_the_rows_of_the_local_backend(tmp_path: Path) -> Non
         local, remote = tmp_path / "local", tmp_path / "dask"
         assert subprocess.run(MOOSE + axes + ["-o", str(local), "--workers", "2"], capture_output=True,
                               timeout=300).returncode == 0
-        run = subprocess.run(MOOSE + axes + ["-o", str(remote), "--backend", "dask", "--address", address,
+        run = subprocess.run(MOOSE + axes + ["-o", str(remote), "--address", address,
                                              "--connect-timeout", "60"], capture_output=True, text=True, timeout=300)
         assert run.returncode == 0, run.stderr
         assert "backend dask" in run.stderr

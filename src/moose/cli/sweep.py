@@ -54,10 +54,10 @@ def add_subparser(subparsers: Any) -> None:
     run.add_argument("-o", "--output", help="the sweep's folder (default: a new folder under runs/)")
     run.add_argument("--config", help="ROS 2 parameter file (default config/moose.yaml)")
     run.add_argument("--resume", action="store_true", help="continue the sweep in -o, skipping recorded cases")
-    run.add_argument("--backend", choices=["local", "dask"], default="local",
-                     help="local worker processes (default) or an existing Dask cluster (--address)")
+    run.add_argument("--backend", choices=["local", "dask"],
+                     help="local worker processes (default), or an existing Dask cluster (the default with --address)")
     run.add_argument("--workers", type=int, help="local worker processes (default: the number of cores)")
-    run.add_argument("--address", help="Dask scheduler, tcp://host:8786")
+    run.add_argument("--address", help="Dask scheduler, tcp://host:8786 (implies --backend dask)")
     run.add_argument("--connect-timeout", type=positive_float, default=10.0,
                      help="seconds to wait for the Dask scheduler and a first worker (default 10)")
     run.add_argument("--timeout", type=positive_float, default=300.0,
@@ -98,7 +98,7 @@ def _axes(args: argparse.Namespace) -> list[Any]:
 
 
 AXIS_OPTIONS = ("speed", "tau", "obstacle_half_width", "nu", "mu", "planner", "obstacle_length", "duration",
-                "field_margin", "samples", "output", "config", "address", "workers")
+                "field_margin", "samples", "output", "config", "address", "workers", "backend")
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
@@ -131,7 +131,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
               "constant speed would pass the obstacle: they may end stopped_short", file=sys.stderr)
     output = Path(args.output) if args.output else Path("runs") / f"sweep-{time.strftime('%Y%m%d-%H%M%S')}"
     folder = RunFolder.open(output, spec, args.resume)
-    if args.backend == "dask":
+    if (args.backend or ("dask" if args.address else "local")) == "dask":
         if not args.address:
             raise ParamError("--backend dask needs --address tcp://HOST:PORT of the scheduler")
         if args.workers is not None:
@@ -139,7 +139,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         backend: Any = DaskBackend(spec.config, args.address, args.timeout, args.connect_timeout)
     else:
         if args.address:
-            raise ParamError("--address is for --backend dask")
+            raise ParamError("--address is for a Dask cluster, not --backend local")
         import os
 
         backend = LocalBackend(spec.config, args.workers or os.cpu_count() or 1, args.timeout)
