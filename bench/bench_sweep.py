@@ -4,8 +4,9 @@ memory of each worker.
 
 Every figure is the ``moose sweep`` command as a user runs it, timed from outside (a subprocess, wall
 clock).  Baselines measured in the same run: the 1-worker sweep of the same cases (efficiency
-= T₁ / (2 T₂), the best of interleaved repeats of each, since other work on the machine varies), and the cases' own CPU-side time (the sum of ``wall_s`` over the rows), which shows what
-start-up, scheduling and writing cost on top.  Cases: Latin-hypercube samples of the paper region
+= T₁ / (2 T₂), the best of interleaved repeats of each, since other work on the machine varies), and
+the cases' own time (the sum of ``wall_s`` over the rows), which shows what start-up, scheduling and
+writing cost on top.  Cases: Latin-hypercube samples of the paper region
 (v 4–8 m/s, τ 1–5 s, ν 0.1–1.0) at the paper calibration, combined planner, 9 simulated seconds each.
 
 Run: ``python bench/bench_sweep.py`` (``--cases N`` to change the big sweep's size).

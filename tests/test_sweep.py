@@ -255,8 +255,8 @@ def test_ctrl_c_keeps_finished_cases_and_resume_runs_the_rest(tmp_path: Path) ->
 @pytest.mark.slow
 def test_failing_cases_are_recorded_and_the_sweep_goes_on(tmp_path: Path) -> None:
     """A case that raises (a plant step the RK4 cannot integrate stably), one that outlives its time limit
-    (121 simulated seconds at a 100 kHz plant step, about 30 s of work, against 10 s) and one whose worker is killed (SIGKILL
-    from outside) are each recorded with why; the others run."""
+    (121 simulated seconds at a 100 kHz plant step, about 30 s of work, against 10 s) and one whose worker
+    is killed (SIGKILL from outside) are each recorded with why; the others run."""
     import psutil
 
     out = tmp_path / "s"
