@@ -219,8 +219,11 @@ def test_ctrl_c_keeps_finished_cases_and_resume_runs_the_rest(tmp_path: Path) ->
     import psutil
 
     out = tmp_path / "s"
+    # 24 cases of a few tenths of a second each (a 10 kHz plant step), so that the sweep is still running
+    # when the third row is seen and Ctrl-C arrives
     args = MOOSE + ["sweep", "--speed", "5,6", "--tau", "1.5,2,2.5", "--nu", "0.3,0.6", "--planner", "msf,combined",
-                    "--duration", "3", "-o", str(out), "--workers", "2", "--quiet"]
+                    "--duration", "3", "--set", "simulation.plant_dt=0.0001", "-o", str(out), "--workers", "2",
+                    "--quiet"]
     process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                start_new_session=True)
     try:
