@@ -94,9 +94,8 @@ class StateObserver:
 
     def estimate(self) -> StateEstimate:
         """The estimate at the time of the last sample."""
-        x = self._x
-        return StateEstimate(self._t, float(x[0]), float(x[1]), float(x[2]), float(x[3]), float(x[4]), float(x[5]),
-                             float(self._delta))
+        x = self._x[:6].tolist()  # Python floats, as float() of each entry
+        return StateEstimate(self._t, x[0], x[1], x[2], x[3], x[4], x[5], float(self._delta))
 
     @property
     def mu_estimate(self) -> float:
@@ -144,9 +143,11 @@ class StateObserver:
             self._fuse_late_gps(sample)
             return
         # x and P are replaced, never modified in place, so the snapshot can share them
-        self._history.append((self._t, self._x, self._P, self._delta, self._ax, sample))
-        while self._history and self._history[0][0] < sample.t - self.params.history_s:
-            self._history.popleft()
+        history = self._history
+        history.append((self._t, self._x, self._P, self._delta, self._ax, sample))
+        oldest = sample.t - self.params.history_s
+        while history and history[0][0] < oldest:
+            history.popleft()
         self._apply(sample)
 
     def _validate(self, sample: Sample) -> None:
