@@ -5,11 +5,11 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: run test bench clean ros bags
+.PHONY: run test bench map clean ros bags
 
 $(STAMP): pyproject.toml ros2_ws/src/moose_ros/setup.py
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet -e '.[test]' -e 'ros2_ws/src/moose_ros[parquet]'
+	$(BIN)/python -m pip install --quiet -e '.[test,sweep,dask]' -e 'ros2_ws/src/moose_ros[parquet]'
 	touch $(STAMP)
 
 run: $(STAMP)
@@ -24,6 +24,15 @@ bench: $(STAMP)
 	$(BIN)/python bench/bench_plant.py
 	$(BIN)/python bench/bench_graph.py
 	$(BIN)/python bench/bench_memory.py
+	$(BIN)/python bench/bench_sweep.py
+
+# the shipped criticality map of the paper region (README, docs/design.md): ~2,700 cases, a few minutes on 2 cores
+MAP := docs/maps/paper_region
+map: $(STAMP)
+	rm -rf $(MAP)
+	$(BIN)/moose sweep --speed 4:8:1 --tau 1:5:0.5 --nu 0.1:1.0:0.1 --mu paper,0.8 --planner combined,mpc,msf -o $(MAP)
+	$(BIN)/moose sweep plot $(MAP)
+	rm $(MAP)/cases.jsonl
 
 # Optional: ROS 2 Jazzy (rclpy, Fast DDS) from wheels in .venv-ros and moose_msgs built for it (README).
 ros:

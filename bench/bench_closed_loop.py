@@ -1,7 +1,9 @@
-"""Closed-loop real-time factor: simulated seconds per wall-clock second (target ≥ 50×).
+"""Closed-loop real-time factor: simulated seconds per wall-clock second on one core (target ≥ 200×, issue 12).
 
 The baseline is the simulated time itself (real time = 1×), measured in the
-same run; the MSF-only run is printed too, to show what the MPC costs.
+same run; the MSF-only run is printed too, to show what the MPC costs.  The last column divides by
+the process's CPU time instead of the wall clock: on a machine that other work shares, it is the
+closer measure of what one core does (best of three runs each).
 Run: ``python bench/bench_closed_loop.py``.
 """
 from __future__ import annotations
@@ -19,15 +21,16 @@ def main() -> None:
     scenario = dataclasses.replace(load_scenario("paper_v7_tau1.4"), lead_time=1.0, duration=9.0)
     simulated = scenario.lead_time + scenario.duration
     print(f"closed loop, {simulated:.0f} s simulated (plant 1 kHz, control 100 Hz, planning 5 Hz)")
-    print(f"{'planner':>10} {'wall s':>8} {'real-time factor':>17}")
+    print(f"{'planner':>10} {'wall s':>8} {'real-time factor':>17} {'per CPU second':>15}")
     for planner in ("combined", "mpc", "msf"):
         simulate(config, scenario, planner, seed=0)  # warm-up (CasADi set-up, the maneuver table)
-        best = float("inf")
+        best = best_cpu = float("inf")
         for _ in range(3):
-            start = time.perf_counter()
+            start, start_cpu = time.perf_counter(), time.process_time()
             simulate(config, scenario, planner, seed=0)
             best = min(best, time.perf_counter() - start)
-        print(f"{planner:>10} {best:8.3f} {simulated / best:16.1f}x")
+            best_cpu = min(best_cpu, time.process_time() - start_cpu)
+        print(f"{planner:>10} {best:8.3f} {simulated / best:16.1f}x {simulated / best_cpu:14.1f}x")
 
 
 if __name__ == "__main__":

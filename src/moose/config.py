@@ -9,7 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Mapping
 
-from .params import build, read_ros_params, to_mapping
+from .params import ParamError, build, read_ros_params, to_mapping
 from .resources import PARAMETER_FILE
 from .schema import Config
 
@@ -29,3 +29,41 @@ def load_config(path: str | Path | None = None, node: str | None = None) -> Conf
 def config_as_ros_params(config: Config) -> dict[str, Any]:
     """The parameter-file document (``/**: ros__parameters: …``) for ``config``."""
     return {"/**": {"ros__parameters": to_mapping(config)}}
+
+
+def with_overrides(config: Config, overrides: Mapping[str, Any], where: str = "--set") -> Config:
+    """``config`` with dotted parameters replaced, e.g. ``{"planning.N_p": 20, "sensors.gps_lag_s": 0.5}``.
+
+    Validated like a parameter file (:func:`moose.params.build`): an unknown group or key, a wrong
+    type or an out-of-range value raises :class:`~moose.params.ParamError` naming ``where``, the key
+    and the value; a key that exists in another group says so (``mpc.N_p`` → ``planning.N_p``).
+    """
+    mapping = to_mapping(config)
+    for key, value in overrides.items():
+        path = key.split(".")
+        node: Any = mapping
+        for i, part in enumerate(path[:-1]):
+            if not isinstance(node, dict) or not isinstance(node.get(part), dict):
+                prefix = ".".join(path[: i + 1])
+                raise ParamError(f"{where} {key}={value!r}: {prefix!r} is not a parameter group"
+                                 f"{_elsewhere(mapping, path[-1])}")
+            node = node[part]
+        if path[-1] not in node or isinstance(node[path[-1]], dict):
+            raise ParamError(f"{where} {key}={value!r}: {key!r} is not a parameter{_elsewhere(mapping, path[-1])}")
+        node[path[-1]] = value
+    return config_from_mapping(mapping, where=where)
+
+
+def _elsewhere(mapping: Mapping[str, Any], name: str, prefix: str = "") -> str:
+    """``" (did you mean a.b?)"`` when parameters named ``name`` exist elsewhere, else ``""``."""
+    found = []
+
+    def walk(node: Mapping[str, Any], path: str) -> None:
+        for key, value in node.items():
+            if isinstance(value, dict):
+                walk(value, f"{path}{key}.")
+            elif key == name:
+                found.append(path + key)
+
+    walk(mapping, prefix)
+    return f" (did you mean {' or '.join(found)}?)" if found else ""

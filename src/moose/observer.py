@@ -32,6 +32,7 @@ velocity whenever the tyres carry lateral force, and kept in [mu_min, mu_max].
 from __future__ import annotations
 
 import math
+import operator
 from collections import deque
 from functools import lru_cache
 from typing import Any, Union
@@ -53,6 +54,8 @@ _FIELDS: dict[type, tuple[str, ...]] = {
     EpsSample: ("t", "delta"),
     GpsSample: ("t", "t_measured", "x", "y", "vX", "vY"),
 }
+_GETTERS = {fields: operator.attrgetter(*fields) for fields in _FIELDS.values()}
+"""The fields of each sample type, read in one call."""
 MU = 6
 """Index of μ in the augmented state."""
 
@@ -91,9 +94,8 @@ class StateObserver:
 
     def estimate(self) -> StateEstimate:
         """The estimate at the time of the last sample."""
-        x = self._x
-        return StateEstimate(self._t, float(x[0]), float(x[1]), float(x[2]), float(x[3]), float(x[4]), float(x[5]),
-                             float(self._delta))
+        x = self._x[:6].tolist()  # Python floats, as float() of each entry
+        return StateEstimate(self._t, x[0], x[1], x[2], x[3], x[4], x[5], float(self._delta))
 
     @property
     def mu_estimate(self) -> float:
@@ -141,9 +143,11 @@ class StateObserver:
             self._fuse_late_gps(sample)
             return
         # x and P are replaced, never modified in place, so the snapshot can share them
-        self._history.append((self._t, self._x, self._P, self._delta, self._ax, sample))
-        while self._history and self._history[0][0] < sample.t - self.params.history_s:
-            self._history.popleft()
+        history = self._history
+        history.append((self._t, self._x, self._P, self._delta, self._ax, sample))
+        oldest = sample.t - self.params.history_s
+        while history and history[0][0] < oldest:
+            history.popleft()
         self._apply(sample)
 
     def _validate(self, sample: Sample) -> None:
@@ -153,10 +157,10 @@ class StateObserver:
             if fields is None:
                 raise TypeError(f"sample = {sample!r} is not a sensor sample (ImuSample, GpsSample, "
                                 "WheelSpeedSample or EpsSample)")
-        for name in fields:
-            value = getattr(sample, name)
-            if not math.isfinite(value):
-                raise ValueError(f"sample.{name} = {value!r} is invalid: expected a finite number")
+        values = _GETTERS[fields](sample)
+        if not all(map(math.isfinite, values)):
+            name, value = next((n, v) for n, v in zip(fields, values) if not math.isfinite(v))
+            raise ValueError(f"sample.{name} = {value!r} is invalid: expected a finite number")
         if sample.t + 1e-9 < self._t:
             raise ValueError(f"sample.t = {sample.t!r} is invalid: older than the last sample at {self._t!r}")
         if isinstance(sample, GpsSample) and sample.t_measured > sample.t + 1e-9:
@@ -182,10 +186,8 @@ class StateObserver:
         elif isinstance(sample, WheelSpeedSample):
             self._advance(sample.t)
             v_wheels = 0.5 * p.r * (sample.omega_rl + sample.omega_rr)
-            PHt = self._P[:, 3].copy()  # H = e_vx
-            gain = PHt / (PHt[3] + prm.r_wheel_speed**2)
-            self._x = self._x + gain * (v_wheels - self._x[3])
-            self._P = self._P - np.outer(gain, PHt)
+            x, P = self._fn["wheel"](self._x, self._P, v_wheels, prm.r_wheel_speed**2)
+            self._x, self._P = x, P.reshape(self._n, self._n, order="F")
             self._bound_mu()
         elif isinstance(sample, EpsSample):
             self._advance(sample.t)
@@ -240,7 +242,8 @@ class StateObserver:
 
 @lru_cache(maxsize=None)
 def _ekf(estimate_mu: bool = False) -> dict[str, Any]:
-    """Compiled EKF steps, parametric in the vehicle: ``predict`` and ``imu`` (predict + γ, a_y updates).
+    """Compiled EKF steps, parametric in the vehicle: ``predict``, ``imu`` (predict + γ, a_y updates) and
+    ``wheel`` (the wheel-speed update of v_x).
 
     The process model is eqs. (trajdef), (eom) with the Pacejka law eq. (fy) on the slip
     angles eq. (alphas) (speeds bounded below by v_low); Jacobians by CasADi's AD.  With
@@ -284,11 +287,16 @@ def _ekf(estimate_mu: bool = False) -> dict[str, Any]:
         Ps = Ps - gain @ PHt.T
     imu = ca.Function(f"{prefix}_imu", [x, P, ax, delta, dt, z_gamma, z_ay, pv, mu_in, q, r],
                       [xs, 0.5 * (Ps + Ps.T)])
-    return {name: _compiled(fn) for name, fn in (("predict", predict), ("imu", imu))}
+    # the wheel-speed update: H = e_vx, a scalar Kalman update (gain = P e_vx / (P_vx,vx + r))
+    z_v, r_v = ca.SX.sym("z_v"), ca.SX.sym("r_v")
+    PHt = P[:, 3]
+    gain = PHt / (PHt[3] + r_v)
+    wheel = ca.Function(f"{prefix}_wheel", [x, P, z_v, r_v], [x + gain * (z_v - x[3]), P - ca.mtimes(gain, PHt.T)])
+    return {name: _compiled(fn) for name, fn in (("predict", predict), ("imu", imu), ("wheel", wheel))}
 
 
 def _compiled(fn: ca.Function) -> Any:
     compiled = compile_function(fn)
     if compiled is not None:
-        return lambda *args: [np.asarray(v) for v in compiled(*args)]
+        return compiled  # returns NumPy arrays (copies) already
     return lambda *args: [np.asarray(v, dtype=float).ravel(order="F") for v in fn(*args)]

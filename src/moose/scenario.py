@@ -25,6 +25,9 @@ from .schema import Config
 from .signals import Obstacle as Box
 
 
+PAPER_FIELD = Box(-50.0, 150.0, -5.0, 10.0)
+"""The drivable field by default: the plotted extent of the paper's result figures (m)."""
+
 V_MAX_FIELD = 20.0
 """Highest speed a scenario may ask for (m/s): the campus field's limit is about 7 m/s."""
 
@@ -51,7 +54,7 @@ class Scenario:
     """Time to collision at which the obstacle appears (s)."""
     obstacle: Box
     """Danger zone of the obstacle: the box the CoG must avoid (m)."""
-    field: Box = Box(-50.0, 150.0, -5.0, 10.0)
+    field: Box = PAPER_FIELD
     """Drivable field; leaving it counts as a failure (m)."""
     duration: float = 8.0
     """Simulated time after the obstacle appears (s)."""
@@ -153,18 +156,31 @@ def adhoc_scenario(
     obstacle_half_width: float,
     obstacle_length: float = 2.0,
     duration: float = 8.0,
+    field_margin: Optional[float] = None,
 ) -> Scenario:
-    """A moose test without a file: obstacle centred on the ego path, appearing at τ."""
+    """A moose test without a file: obstacle centred on the ego path, appearing at τ.
+
+    The field is the paper's figures' (:data:`PAPER_FIELD`); with ``field_margin`` it also
+    extends that far beyond the obstacle's sides, |y| ≤ half width + margin, so that a wide obstacle
+    (a high ν at a long τ) is judged on the car's maneuver, not on a field narrower than the obstacle.
+    """
     check("speed", speed, lambda v: 0.0 < v <= V_MAX_FIELD, f"a speed in (0, {V_MAX_FIELD}] m/s")
     check("tau", tau, positive, "a positive time to collision (s)")
     check("obstacle_half_width", obstacle_half_width, positive, "a positive half width (m)")
     check("obstacle_length", obstacle_length, positive, "a positive length (m)")
+    if field_margin is not None:
+        check("field_margin", field_margin, non_negative, "a non-negative distance (m)")
     x_min = speed * tau
+    field = PAPER_FIELD
+    if field_margin is not None:
+        side = obstacle_half_width + field_margin
+        field = Box(field.x_min, field.x_max, min(field.y_min, -side), max(field.y_max, side))
     return Scenario(
         name=f"adhoc_v{speed:g}_tau{tau:g}_w{obstacle_half_width:g}",
         v_init=speed,
         v_des=speed,
         tau=tau,
         obstacle=Box(x_min, x_min + obstacle_length, -obstacle_half_width, obstacle_half_width),
+        field=field,
         duration=duration,
     )

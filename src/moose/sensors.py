@@ -72,16 +72,28 @@ class Sensors:
         """Samples delivered at ``t`` from the true ``state`` and the IMU ``specific_force`` (a_x, a_y)."""
         p, n = self.params, self.rng.normal
         out: list[Sample] = []
-        if self._due("imu", t):
-            e = n(0.0, 1.0, 3)
-            out.append(ImuSample(t, float(specific_force[0] + p.accel_std * e[0]),
-                                 float(specific_force[1] + p.accel_std * e[1]),
-                                 float(state[GAMMA] + p.gyro_std * e[2])))
-        if self._due("wheel", t):
-            e = n(0.0, p.wheel_std, 2)
-            out.append(WheelSpeedSample(t, float(state[OMEGA_RL] + e[0]), float(state[OMEGA_RR] + e[1])))
-        if self._due("eps", t):
-            out.append(EpsSample(t, float(state[DELTA] + n(0.0, p.eps_std))))
+        imu, wheel, eps = self._due("imu", t), self._due("wheel", t), self._due("eps", t)
+        if imu and wheel and eps:
+            # the usual tick: the same six draws, in the same order, as the three calls below (a
+            # Generator's normal(0, s) is s times its next standard normal), in one call
+            z = self.rng.standard_normal(6).tolist()
+            out.append(ImuSample(t, float(specific_force[0] + p.accel_std * z[0]),
+                                 float(specific_force[1] + p.accel_std * z[1]),
+                                 float(state[GAMMA] + p.gyro_std * z[2])))
+            out.append(WheelSpeedSample(t, float(state[OMEGA_RL] + p.wheel_std * z[3]),
+                                        float(state[OMEGA_RR] + p.wheel_std * z[4])))
+            out.append(EpsSample(t, float(state[DELTA] + p.eps_std * z[5])))
+        else:
+            if imu:
+                e = n(0.0, 1.0, 3)
+                out.append(ImuSample(t, float(specific_force[0] + p.accel_std * e[0]),
+                                     float(specific_force[1] + p.accel_std * e[1]),
+                                     float(state[GAMMA] + p.gyro_std * e[2])))
+            if wheel:
+                e = n(0.0, p.wheel_std, 2)
+                out.append(WheelSpeedSample(t, float(state[OMEGA_RL] + e[0]), float(state[OMEGA_RR] + e[1])))
+            if eps:
+                out.append(EpsSample(t, float(state[DELTA] + n(0.0, p.eps_std))))
         if self._due("gps", t):
             c, s = math.cos(state[THETA]), math.sin(state[THETA])
             vX = state[VX] * c - state[VY] * s

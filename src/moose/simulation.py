@@ -106,7 +106,7 @@ class ClosedLoop:
         dt_motion = 1.0 / sim.motion_rate_hz
         end_time = self.scenario.lead_time + self.scenario.duration
         n_motion = int(round(end_time * sim.motion_rate_hz))
-        trace = np.full((n_motion + 1, len(TRACE_FIELDS)), np.nan)
+        rows: list[tuple[float, ...]] = []
         planning: list[PlanningRecord] = []
         appeared = False
         first_threat: Optional[Threat] = None
@@ -119,13 +119,17 @@ class ClosedLoop:
         samples: list = []
         estimates: list = []
         threats: list = []
+        # the blocks' methods, looked up once (the loop runs 100 times per simulated second)
+        plant, observe, sense, detect = self.plant, self.observer.update, self.sensors.sample, self.detector.update
+        steps_per_motion = sim.plant_steps_per_motion
         for k in range(n_motion + 1):
             t = k * dt_motion
-            state = self.plant.state
-            specific_force = self.plant.specific_force if k else self.plant.imu_specific_force(state, u)
-            for sample in self.sensors.sample(t, state, specific_force):
-                samples.append(sample)
-                self.observer.update(sample)
+            state = plant.state
+            specific_force = plant.specific_force if k else plant.imu_specific_force(state, u)
+            delivered = sense(t, state, specific_force)
+            samples.extend(delivered)
+            for sample in delivered:
+                observe(sample)
                 if isinstance(sample, EpsSample):
                     delta_meas = sample.delta
             estimate = self.observer.estimate()
@@ -133,7 +137,7 @@ class ClosedLoop:
             appeared = appeared or self.scenario.appears(float(state[0]), float(state[3]))
             visible = [self.scenario.danger_zone] if appeared else []
             previous = threat
-            threat = self.detector.update(t, estimate, visible)
+            threat = detect(t, estimate, visible)
             threats.append((t, threat))
             if threat is not None and first_threat is None:
                 first_threat = threat
@@ -149,13 +153,14 @@ class ClosedLoop:
                 reference = self.step.reference_between(estimate) or reference
                 row.delta_ref = reference.delta
             u = self.motion.step(reference, estimate, delta_meas, dt_motion)
-            trace[k] = (
-                t, *state[:6], state[8], state[6], state[7],
+            rows.append((
+                t, *state[:6].tolist(), state[8], state[6], state[7],
                 estimate.x, estimate.y, estimate.theta, estimate.vx, estimate.vy, estimate.gamma,
-                row.delta_ref, row.delta_mpc, row.vx_ref, row.weight_mpc, *u, float(threat is not None),
-            )
+                row.delta_ref, row.delta_mpc, row.vx_ref, row.weight_mpc, *u.tolist(), float(threat is not None),
+            ))
             if k < n_motion:
-                self.plant.step(u, sim.plant_steps_per_motion)
+                plant.step(u, steps_per_motion)
+        trace = np.array(rows, dtype=float)
         columns = {name: trace[:, i].copy() for i, name in enumerate(TRACE_FIELDS)}
         return SimulationResult(self.scenario, self.mode, self.seed, columns, planning, first_threat,
                                 self.config, end_time,

@@ -215,15 +215,17 @@ class VehiclePlant:
     def step(self, u: np.ndarray, n: int = 1) -> np.ndarray:
         """Advance ``n`` steps of ``dt`` with the input ``u`` held; returns the new state."""
         u = np.asarray(u, dtype=float)
-        if u.shape != (N_INPUT,) or not np.all(np.isfinite(u)):
+        if u.shape != (N_INPUT,) or not all(map(math.isfinite, u.tolist())):
             raise ValueError(f"u = {u!r} is invalid: expected {N_INPUT} finite plant inputs")
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
             raise ValueError(f"n = {n!r} is invalid: expected a positive number of steps")
         state = self._state
-        for size in [CHUNK] * (n // CHUNK) + [1] * (n % CHUNK):
-            state, force = self._chunks[size](state, u, self._p, self.dt)
-            state = np.asarray(state, dtype=float).ravel()
-        self._state = state
+        chunk, single = self._chunks[CHUNK], self._chunks[1]
+        for _ in range(n // CHUNK):
+            state, force = chunk(state, u, self._p, self.dt)
+        for _ in range(n % CHUNK):
+            state, force = single(state, u, self._p, self.dt)
+        self._state = np.asarray(state, dtype=float).ravel()
         force = np.asarray(force, dtype=float).ravel()
         self._force = (float(force[0]), float(force[1]))
         self._t += n * self.dt

@@ -87,6 +87,17 @@ def positive_float(text: str) -> float:
     return value
 
 
+def non_negative_float(text: str) -> float:
+    """argparse type: a number ≥ 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not value >= 0.0:
+        raise argparse.ArgumentTypeError(f"{text!r} must not be negative")
+    return value
+
+
 def non_negative_int(text: str) -> int:
     """argparse type: an integer >= 0 (a seed)."""
     try:
@@ -163,6 +174,8 @@ def add_scenario_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--tau", type=positive_float, help="ad-hoc test: time to collision at appearance (s)")
     group.add_argument("--obstacle-half-width", type=positive_float, help="ad-hoc test: danger-zone half width (m)")
     group.add_argument("--obstacle-length", type=positive_float, default=2.0, help="ad-hoc test: length (m)")
+    group.add_argument("--field-margin", type=non_negative_float,
+                       help="ad-hoc test: widen the field to |y| <= half width + this (m; default: the paper's field)")
     group.add_argument("--duration", type=positive_float, help="simulated seconds after the obstacle appears")
     group.add_argument("--config", help="ROS 2 parameter file (default config/moose.yaml)")
     group.add_argument("--planner", choices=["combined", "mpc", "msf"], help="planner driving the car")
@@ -186,7 +199,8 @@ def scenario_from_args(args: Any) -> Any:
             raise ParamError("--scenario cannot be combined with the ad-hoc flags --speed/--tau/--obstacle-half-width")
         if any(v is None for v in adhoc):
             raise ParamError("an ad-hoc moose test needs --speed, --tau and --obstacle-half-width")
-        scenario = adhoc_scenario(args.speed, args.tau, args.obstacle_half_width, args.obstacle_length)
+        scenario = adhoc_scenario(args.speed, args.tau, args.obstacle_half_width, args.obstacle_length,
+                                  field_margin=getattr(args, "field_margin", None))
     else:
         scenario = load_scenario(args.scenario or DEFAULT_SCENARIO)
     changes: dict[str, Any] = {}

@@ -30,6 +30,8 @@ def add_subparser(subparsers: Any) -> None:
     simulate.add_argument("--plot", help="write the paper-style figure (PNG) to this path")
     simulate.add_argument("--bag", help="record the run into this bag directory (default: a new folder under runs/)")
     simulate.add_argument("--no-bag", action="store_true", help="do not record a bag")
+    simulate.add_argument("--set", action="append", default=[], metavar="GROUP.KEY=VALUE",
+                          help="change one parameter of the configuration, e.g. planning.N_p=20 (repeatable)")
     simulate.set_defaults(func=cmd_simulate)
 
 
@@ -71,15 +73,34 @@ def bag_recorder(args: argparse.Namespace) -> Optional[Callable[[Any, Path], Any
     return record
 
 
+def parse_settings(items: list[str]) -> dict[str, Any]:
+    """``GROUP.KEY=VALUE`` items as a mapping (values are YAML scalars: numbers, true/false, names)."""
+    import yaml
+
+    settings: dict[str, Any] = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        if not sep or not key.strip():
+            raise ParamError(f"--set {item!r} is invalid: expected GROUP.KEY=VALUE")
+        try:
+            settings[key.strip()] = yaml.safe_load(text)
+        except yaml.YAMLError:
+            settings[key.strip()] = text
+    return settings
+
+
 def cmd_simulate(args: argparse.Namespace) -> int:
-    from ..config import load_config
+    from ..config import load_config, with_overrides
     from ..metrics import summarize
     from ..plots import plot_result
     from ..simulation import simulate
 
     record = bag_recorder(args)
     scenario = scenario_from_args(args)
-    config = configure(load_config(args.config), args)
+    config = load_config(args.config)
+    if args.set:
+        config = with_overrides(config, parse_settings(args.set))
+    config = configure(config, args)
     # every output is checked before the run, so none of them is lost at its end
     json_path = check_output_file("--json", args.json)
     plot_path = check_output_file("--plot", args.plot, plot_suffixes()) if args.plot is not None else None

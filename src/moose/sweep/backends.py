@@ -1,0 +1,215 @@
+"""Where the cases run: worker processes on this machine (default), or an existing Dask cluster.
+
+Both backends take the same cases and call :func:`moose.sweep.case.run_case` on them, so a sweep
+gives the same rows on either (``tests/test_sweep.py`` checks it on a local two-worker cluster).
+
+* :class:`LocalBackend` — ``workers`` processes of its own (spawned, so nothing of the parent's
+  threads is inherited), one case each at a time over a pipe.  The parent knows which case every
+  worker holds: a worker that dies (a segfault in compiled code, the OOM killer) has its case
+  recorded as ``crashed`` and is replaced; one that outlives the case's time limit by ``grace``
+  seconds (stuck in compiled code, where the in-thread timeout cannot reach it) is killed and its
+  case recorded as ``timeout``.  Workers ignore SIGINT: Ctrl-C reaches the parent, which stops them.
+* :class:`DaskBackend` — a ``distributed`` client on ``address``.  Before any case it checks that a
+  scheduler answers within ``connect_timeout`` and that every worker runs the same moose source
+  (:func:`moose.sweep.store.code_version`).  A worker lost under a case twice is Dask's
+  ``KilledWorker``: that case is recorded as ``crashed``.  The cluster is the user's: it is never
+  shut down, only the client is closed.
+"""
+from __future__ import annotations
+
+import multiprocessing
+import signal
+import time
+from multiprocessing.connection import Connection, wait
+from typing import Any, Callable, Iterable, Optional, Protocol
+
+from ..params import ParamError
+from ..schema import Config
+from .axes import Case
+from .case import failed_row, run_case
+
+OnRow = Callable[[dict[str, Any]], None]
+
+
+class Backend(Protocol):
+    name: str
+
+    def run(self, cases: Iterable[Case], on_row: OnRow) -> None:
+        """Run every case, passing each row to ``on_row`` as it arrives (in the calling thread)."""
+
+
+def _worker(conn: Connection, base: Config, timeout: Optional[float]) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    while True:
+        try:
+            case = conn.recv()
+        except EOFError:
+            return
+        if case is None:
+            return
+        conn.send(run_case(case, base, timeout))
+
+
+class _Process:
+    """One worker process and the case it holds."""
+
+    def __init__(self, context: Any, base: Config, timeout: Optional[float]) -> None:
+        self.conn, child = context.Pipe()
+        self.process = context.Process(target=_worker, args=(child, base, timeout), daemon=True)
+        self.process.start()
+        child.close()
+        self.case: Optional[Case] = None
+        self.started = 0.0
+
+    def give(self, case: Case) -> None:
+        self.case, self.started = case, time.monotonic()
+        self.conn.send(case)
+
+    def stop(self, kill: bool = False) -> None:
+        if kill:
+            self.process.kill()
+        else:
+            try:
+                self.conn.send(None)
+            except OSError:
+                pass
+        self.process.join(timeout=5.0)
+        if self.process.is_alive():
+            self.process.kill()
+            self.process.join()
+        self.conn.close()
+
+
+class LocalBackend:
+    """Worker processes on this machine."""
+
+    name = "local"
+
+    def __init__(self, base: Config, workers: int, timeout: Optional[float], grace: float = 10.0) -> None:
+        if not (isinstance(workers, int) and workers >= 1):
+            raise ParamError(f"--workers {workers!r} is invalid: expected a positive number of processes")
+        self.base, self.workers, self.timeout, self.grace = base, workers, timeout, grace
+        self._context = multiprocessing.get_context("spawn")
+
+    def run(self, cases: Iterable[Case], on_row: OnRow) -> None:
+        queue = list(cases)
+        queue.reverse()
+        pool = [_Process(self._context, self.base, self.timeout) for _ in range(min(self.workers, len(queue)))]
+        try:
+            for worker in pool:
+                if queue:
+                    worker.give(queue.pop())
+            while any(w.case is not None for w in pool):
+                busy = [w for w in pool if w.case is not None]
+                ready = set(wait([w.conn for w in busy] + [w.process.sentinel for w in busy], timeout=0.5))
+                for i, worker in enumerate(pool):
+                    if worker.case is None:
+                        continue
+                    row = None
+                    if worker.conn in ready or worker.process.sentinel in ready:
+                        row = self._collect(worker)
+                    elif self.timeout is not None and time.monotonic() - worker.started > self.timeout + self.grace:
+                        row = failed_row(worker.case, "timeout",
+                                         f"killed: no answer {self.timeout + self.grace:g} s after the start "
+                                         f"(time limit {self.timeout:g} s + {self.grace:g} s grace)",
+                                         time.monotonic() - worker.started, f"pid {worker.process.pid}")
+                        worker.stop(kill=True)
+                    if row is None:
+                        continue
+                    worker.case = None
+                    if not worker.process.is_alive():
+                        worker.stop(kill=True)
+                        worker = pool[i] = _Process(self._context, self.base, self.timeout)
+                    on_row(row)
+                    if queue:
+                        case = queue.pop()
+                        try:
+                            worker.give(case)
+                        except OSError:  # it died between two cases: a new one takes the case
+                            worker.stop(kill=True)
+                            worker = pool[i] = _Process(self._context, self.base, self.timeout)
+                            worker.give(case)
+        finally:
+            for worker in pool:
+                worker.stop(kill=worker.case is not None)
+
+    @staticmethod
+    def _collect(worker: _Process) -> Optional[dict[str, Any]]:
+        """The worker's row, or a ``crashed`` row if it died without one; None if not ready after all."""
+        case = worker.case
+        assert case is not None
+        try:
+            if worker.conn.poll():
+                return worker.conn.recv()
+        except (EOFError, OSError):
+            pass
+        if worker.process.is_alive():
+            return None
+        worker.process.join()
+        code = worker.process.exitcode
+        how = f"signal {-code} ({signal.Signals(-code).name})" if code is not None and code < 0 else f"exit status {code}"
+        return failed_row(case, "crashed", f"the worker process died under this case: {how}",
+                          time.monotonic() - worker.started, f"pid {worker.process.pid}")
+
+
+class DaskBackend:
+    """An existing Dask distributed cluster (``tcp://host:port`` of its scheduler)."""
+
+    name = "dask"
+
+    def __init__(self, base: Config, address: str, timeout: Optional[float], connect_timeout: float = 10.0) -> None:
+        try:
+            from distributed import Client
+        except ImportError:
+            raise ParamError("--backend dask needs dask.distributed: pip install 'moose-avoidance[dask]'") from None
+        from .store import code_version
+
+        self.base, self.timeout = base, timeout
+        try:
+            self.client = Client(address, timeout=f"{connect_timeout}s", set_as_default=False)
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise ParamError(f"--address {address!r}: no Dask scheduler answers "
+                             f"({type(exc).__name__}: {exc})") from None
+        try:
+            try:
+                self.client.wait_for_workers(1, timeout=connect_timeout)
+            except (TimeoutError, OSError):
+                raise ParamError(f"--address {address!r}: the scheduler has no workers "
+                                 f"(waited {connect_timeout:g} s)") from None
+            ours = code_version()
+            theirs = self.client.run(code_version)
+            different = {worker: v for worker, v in theirs.items() if v != ours}
+            if different:
+                worker, version = next(iter(different.items()))
+                raise ParamError(f"--address {address!r}: worker {worker} runs other moose code ({version}, "
+                                 f"here {ours}); install the same version on every worker")
+        except BaseException:
+            self.client.close()
+            raise
+
+    def run(self, cases: Iterable[Case], on_row: OnRow) -> None:
+        from distributed import as_completed
+
+        cases = list(cases)
+        if not cases:
+            return
+        import uuid
+
+        token = uuid.uuid4().hex[:8]
+        base = self.client.scatter(self.base, broadcast=True)
+        futures = self.client.map(run_case, cases, base=base, timeout=self.timeout,
+                                  key=[f"moose-case-{c.id}-{token}" for c in cases], pure=False)
+        by_key = {f.key: c for f, c in zip(futures, cases)}
+        try:
+            for future in as_completed(futures, loop=self.client.loop):
+                case = by_key[future.key]
+                try:
+                    row = future.result()
+                except Exception as exc:  # noqa: BLE001 - KilledWorker and the like: the case is lost, not the sweep
+                    row = failed_row(case, "crashed", f"{type(exc).__name__}: {exc}", None, "dask")
+                on_row(row)
+        finally:
+            self.client.cancel(futures)
+
+    def close(self) -> None:
+        self.client.close()

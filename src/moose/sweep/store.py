@@ -1,0 +1,199 @@
+"""The run folder of a sweep: manifest, exact configuration, journal of finished cases, results table.
+
+::
+
+    DIR/manifest.json    the spec (axes, sampling and its seed, configuration), its hash, the code's
+                         version, the backend, case counts and the state (running, interrupted, complete)
+    DIR/config.yaml      the exact base configuration (ROS 2 parameter file; the cases' --set are columns)
+    DIR/cases.jsonl      one JSON row per finished case, appended and flushed as each case ends
+    DIR/results.parquet  the same rows as a table (written at the end, on Ctrl-C and on --resume)
+
+The journal is the record: a row is in it as soon as its case ends, so an interrupted or killed
+sweep loses only the cases that were running.  ``results.parquet`` is rebuilt from it (a last line
+cut short by a kill is ignored).  A folder that holds another sweep (another spec hash) is refused.
+"""
+from __future__ import annotations
+
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+from typing import IO, Any, Iterable, Optional
+
+import yaml
+
+from ..params import ParamError
+from .spec import SweepSpec
+
+MANIFEST = "manifest.json"
+CONFIG = "config.yaml"
+JOURNAL = "cases.jsonl"
+RESULTS = "results.parquet"
+
+
+def code_version() -> dict[str, str]:
+    """The moose version and a hash of its source files: equal hashes, equal code."""
+    import hashlib
+    from importlib.metadata import PackageNotFoundError, version
+
+    import moose
+
+    try:
+        release = version("moose-avoidance")
+    except PackageNotFoundError:
+        release = "not installed"
+    root = Path(moose.__file__).parent
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob("*")):
+        if path.suffix in (".py", ".c", ".yaml", ".dbc") and "__pycache__" not in path.parts:
+            digest.update(str(path.relative_to(root)).encode())
+            digest.update(path.read_bytes())
+    return {"moose": release, "source_sha256": digest.hexdigest()[:16]}
+
+
+def pyarrow_or_error() -> Any:
+    """pyarrow.parquet, or a :class:`ParamError` saying how to install it."""
+    try:
+        import pyarrow.parquet as pq
+    except ImportError:
+        raise ParamError("moose sweep writes parquet and needs pyarrow: pip install 'moose-avoidance[sweep]'") from None
+    return pq
+
+
+class RunFolder:
+    """A sweep's folder; :meth:`open` checks it against the spec before anything is written."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        self._journal: Optional[IO[str]] = None
+
+    @classmethod
+    def open(cls, path: Path, spec: SweepSpec, resume: bool) -> "RunFolder":
+        """The folder for ``spec``: new, or (with ``resume``) one that holds the same sweep."""
+        folder = cls(path)
+        manifest = folder.manifest()
+        if path.exists() and not path.is_dir():
+            raise ParamError(f"-o {str(path)!r} is invalid: it is a file, not a folder")
+        if manifest is not None:
+            theirs = manifest.get("spec_hash")
+            if theirs != spec.hash:
+                raise ParamError(f"-o {str(path)!r} holds a different sweep (spec {theirs}, this one {spec.hash}): "
+                                 "choose another folder")
+            if not resume:
+                raise ParamError(f"-o {str(path)!r} holds this sweep already ({len(folder.done_ids())} cases done): "
+                                 "--resume continues it")
+        elif path.exists() and any(path.iterdir()):
+            raise ParamError(f"-o {str(path)!r} is invalid: the folder is not empty and holds no sweep ({MANIFEST})")
+        return folder
+
+    def manifest(self) -> Optional[dict[str, Any]]:
+        path = self.path / MANIFEST
+        if not path.exists():
+            return None
+        try:
+            return json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            raise ParamError(f"{str(path)!r} is not a readable sweep manifest: {exc}") from None
+
+    def write_manifest(self, manifest: dict[str, Any]) -> None:
+        self.path.mkdir(parents=True, exist_ok=True)
+        tmp = self.path / (MANIFEST + ".tmp")
+        tmp.write_text(json.dumps(manifest, indent=2, sort_keys=True, default=repr) + "\n", encoding="utf-8")
+        os.replace(tmp, self.path / MANIFEST)
+
+    def start(self, spec: SweepSpec, n_cases: int, backend: str) -> dict[str, Any]:
+        """Write the manifest and the configuration (keeping a resumed sweep's creation time)."""
+        from ..config import config_as_ros_params
+
+        old = self.manifest() or {}
+        manifest = {
+            "format": 1,
+            "spec": spec.describe(),
+            "spec_hash": spec.hash,
+            "cases": n_cases,
+            "created": old.get("created", time.strftime("%Y-%m-%dT%H:%M:%S%z")),
+            "code": code_version(),
+            "python": sys.version.split()[0],
+            "host": platform.node(),
+            "backend": backend,
+            "state": "running",
+        }
+        if old and old.get("code") != manifest["code"]:
+            manifest["code_history"] = old.get("code_history", []) + [old.get("code")]
+        self.write_manifest(manifest)
+        (self.path / CONFIG).write_text(yaml.safe_dump(config_as_ros_params(spec.config), sort_keys=False),
+                                        encoding="utf-8")
+        return manifest
+
+    # -- the journal -------------------------------------------------------------------------------
+    def rows(self) -> list[dict[str, Any]]:
+        """Every recorded row, the last of each case id (a truncated last line is skipped)."""
+        path = self.path / JOURNAL
+        if not path.exists():
+            return []
+        rows: dict[str, dict[str, Any]] = {}
+        with open(path, encoding="utf-8") as handle:
+            for line in handle:
+                try:
+                    row = json.loads(line)
+                except ValueError:
+                    continue  # a line cut short by a kill
+                rows[row["case_id"]] = row
+        return list(rows.values())
+
+    def done_ids(self) -> set[str]:
+        return {row["case_id"] for row in self.rows()}
+
+    def append(self, row: dict[str, Any]) -> None:
+        """Record one finished case (flushed to the operating system at once)."""
+        if self._journal is None:
+            self.path.mkdir(parents=True, exist_ok=True)
+            path = self.path / JOURNAL
+            cut = path.exists() and path.stat().st_size > 0 and not path.read_bytes().endswith(b"\n")
+            self._journal = open(path, "a", encoding="utf-8")
+            if cut:  # a line cut short by a kill: end it, so that the next row starts a line of its own
+                self._journal.write("\n")
+        self._journal.write(json.dumps(row, allow_nan=False) + "\n")
+        self._journal.flush()
+
+    def close(self) -> None:
+        if self._journal is not None:
+            self._journal.close()
+            self._journal = None
+
+    def write_results(self) -> Path:
+        """results.parquet from the journal (atomically replaced)."""
+        pq = pyarrow_or_error()
+        import pyarrow as pa
+
+        rows = self.rows()
+        columns = _column_order(rows)
+        table = pa.Table.from_pylist([{c: row.get(c) for c in columns} for row in rows]) if rows else pa.table({})
+        target = self.path / RESULTS
+        tmp = self.path / (RESULTS + ".tmp")
+        pq.write_table(table, tmp)
+        os.replace(tmp, target)
+        return target
+
+
+def _column_order(rows: Iterable[dict[str, Any]]) -> list[str]:
+    """Columns in first-seen order (inputs first, as the rows have them)."""
+    seen: dict[str, None] = {}
+    for row in rows:
+        for key in row:
+            seen.setdefault(key, None)
+    return list(seen)
+
+
+def read_results(path: Path) -> Any:
+    """The results table of a sweep folder (or a parquet file) as a pyarrow table."""
+    pq = pyarrow_or_error()
+    path = Path(path)
+    target = path / RESULTS if path.is_dir() else path
+    if not target.exists():
+        if path.is_dir() and (path / JOURNAL).exists():
+            return pq.read_table(RunFolder(path).write_results())
+        raise ParamError(f"{str(path)!r} holds no sweep results ({RESULTS})")
+    return pq.read_table(target)
