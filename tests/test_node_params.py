@@ -90,3 +90,19 @@ def test_each_node_gets_only_the_parameters_it_takes() -> None:
     assert overrides["observer"] == {"scenario": "paper_v5_tau3", "simulation.planner": "mpc", "use_sim_time": True}
     assert overrides["vehicle_simulator"]["seed"] == 4 and overrides["vehicle_simulator"]["vehicle_bus"] == "can"
     assert overrides["vehicle_simulator"]["wait_for"] == [n for n in overrides if n != "vehicle_simulator"]
+
+
+def test_every_node_of_an_adhoc_launch_assumes_the_launchers_field() -> None:
+    """``moose launch --field-margin``: the nodes' scenario is the launcher's, field included (it was the
+    launcher's verdict alone that widened)."""
+    from moose.scenario import adhoc_scenario
+
+    given = {"speed": 7.0, "tau": 2.0, "obstacle_half_width": 3.0, "field_margin": 4.0}
+    launcher = adhoc_scenario(7.0, 2.0, 3.0, 2.0, field_margin=4.0)
+    assert launcher.field != load_scenario("paper_v7_tau2").field  # the margin changes it
+    overrides = node_overrides("full", "combined", given)
+    takers = [n for n, o in overrides.items() if "speed" in o]
+    assert {"vehicle_simulator", "observer", "mpc_planner", "msf_planner"} <= set(takers)
+    for name in takers:
+        _, params = node_parameters(name, {k: v for k, v in overrides[name].items() if "." not in k})
+        assert params.load_scenario().field == launcher.field, name

@@ -58,6 +58,8 @@ class ScenarioParams(NodeParams):
     obstacle_length: float = _checked(2.0, positive, "a positive length (m)")
     duration: Optional[float] = _checked(None, positive, "a positive duration (s)")
     mu: Optional[float] = _checked(None, positive, "a positive friction coefficient")
+    field_margin: Optional[float] = _checked(None, non_negative, "a non-negative distance (m)")
+    """Ad-hoc tests: the field reaches this far beside the obstacle (``--field-margin``); ``None``: the paper's."""
 
     def load_scenario(self) -> Any:
         """The :class:`moose.scenario.Scenario` these parameters name."""
