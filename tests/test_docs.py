@@ -1,5 +1,6 @@
-"""docs/design.md's module maps match the code: every module of ``moose`` and ``moose_ros`` is in its map,
-every module a map names exists, and a package's row names each of its modules."""
+"""The docs match the code and stay inside the repository: docs/design.md's module maps name every module of
+``moose`` and ``moose_ros`` and only those, a package's row names each of its modules, and every link of
+every Markdown file points to a file of the repository."""
 from __future__ import annotations
 
 import re
@@ -52,3 +53,17 @@ def test_a_packages_row_names_each_of_its_modules(package: str) -> None:
             named = set(re.findall(r"`([A-Za-z_]+)`", rows[name]))
             missing = modules(folder / name) - named
             assert not missing, f"{package}.{name}: its row does not name {sorted(missing)}"
+
+
+def markdown_files() -> list[Path]:
+    skip = {".git", ".venv", ".venv-ros", "runs", "node_modules", ".pytest_cache"}
+    return sorted(p for p in ROOT.rglob("*.md") if not skip & set(p.relative_to(ROOT).parts))
+
+
+@pytest.mark.parametrize("path", markdown_files(), ids=lambda p: str(p.relative_to(ROOT)))
+def test_every_link_points_into_the_repository(path: Path) -> None:
+    text = path.read_text(encoding="utf-8")
+    assert not re.findall(r"https?://(?!127\.0\.0\.1|localhost)[^\s)>`]+", text), "a link outside the repository"
+    for target in re.findall(r"\]\(([^)\s]+)\)", text):
+        local = (path.parent / target.split("#")[0]).resolve()
+        assert local.is_relative_to(ROOT) and local.exists(), f"{target} is not a file of the repository"
