@@ -8,11 +8,13 @@ import pytest
 
 from moose.config import load_config
 from moose.reproduce import (
-    COMPARISON, NINE, RUNS, Claim, Run, claims, render_claims, render_results, run_all, update_document,
+    COMPARISON, NINE, RUNS, Claim, Run, claims, render_claims, render_results, render_summary, run_all,
+    update_document,
 )
 
 ROOT = Path(__file__).resolve().parents[1]
 DESIGN = ROOT / "docs" / "design.md"
+README = ROOT / "README.md"
 
 
 @pytest.fixture(scope="module")
@@ -34,10 +36,10 @@ def test_every_scenario_runs_with_every_planner(runs: list[Run]) -> None:
         assert r.summary["complete"]
 
 
-def block(name: str) -> str:
-    text = DESIGN.read_text(encoding="utf-8")
+def block(name: str, path: Path = DESIGN) -> str:
+    text = path.read_text(encoding="utf-8")
     match = re.search(rf"<!-- BEGIN {name} -->\n(.*?)<!-- END {name} -->", text, re.S)
-    assert match, f"docs/design.md has no generated block {name!r}"
+    assert match, f"{path.name} has no generated block {name!r}"
     return match.group(1)
 
 
@@ -61,6 +63,11 @@ def test_the_documented_results_are_the_generated_ones(runs: list[Run]) -> None:
     assert column(documented, 4) == column(generated, 4), "docs/design.md is stale: run `moose reproduce --write`"
 
 
+def test_the_readmes_summary_is_the_generated_one(runs: list[Run], found: list[Claim]) -> None:
+    assert block("summary", README).strip() == render_summary(runs, found), \
+        "README.md is stale: run `moose reproduce --write docs/design.md --write README.md`"
+
+
 def test_update_document_replaces_only_its_blocks(tmp_path: Path) -> None:
     path = tmp_path / "d.md"
     path.write_text("a\n<!-- BEGIN x -->\nold\n<!-- END x -->\nb\n", encoding="utf-8")
@@ -75,6 +82,10 @@ def test_the_command_refuses_bad_paths_before_running(tmp_path: Path, capsys: py
 
     assert main(["reproduce", "--write", str(tmp_path / "missing.md")]) == 2
     assert "--write" in capsys.readouterr().err
+    plain = tmp_path / "plain.md"
+    plain.write_text("no generated blocks here\n", encoding="utf-8")
+    assert main(["reproduce", "--write", str(plain)]) == 2
+    assert "holds none of the generated blocks" in capsys.readouterr().err
     assert main(["reproduce", "--json", str(tmp_path / "no" / "such" / "out.json")]) == 2
     with pytest.raises(SystemExit) as exited:  # argparse's own error: "moose reproduce: error: argument --seed: …"
         main(["reproduce", "--seed", "-1"])

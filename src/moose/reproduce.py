@@ -5,8 +5,8 @@ planner alone and the MPC planner alone — the MPC once with the paper's baseli
 SQP as Table II caps it) and once with the default fast solver.  Each claim of the paper is one
 :class:`Claim`: what the paper says, the criterion it is held to here, whether it holds, and the
 numbers.  :func:`render_results` and :func:`render_claims` write the tables that docs/design.md
-carries between ``<!-- BEGIN name -->`` / ``<!-- END name -->`` markers (:func:`update_document`):
-they are generated, never edited by hand.
+carries, :func:`render_summary` the README's summary, between ``<!-- BEGIN name -->`` /
+``<!-- END name -->`` markers (:func:`update_document`): they are generated, never edited by hand.
 """
 from __future__ import annotations
 
@@ -208,6 +208,36 @@ def render_claims(found: Sequence[Claim]) -> str:
     return "\n".join(lines)
 
 
+def render_summary(runs: Sequence[Run], found: Sequence[Claim]) -> str:
+    """The README's summary of the runs (markdown bullets): outcomes per planner, the extreme case, the blend's
+    share, and how many of the paper's claims hold."""
+    from collections import Counter
+
+    scenarios = sorted({r.scenario for r in runs})
+    lines = []
+    for label in dict.fromkeys(r.label for r in runs):
+        counts = Counter(r.summary["outcome"] for r in runs if r.label == label)
+        text = ", ".join(f"{n} {outcome}" for outcome, n in sorted(counts.items(), key=lambda kv: (-kv[1], kv[0])))
+        lines.append(f"- **{label}**: {text} (of {len(scenarios)} scenarios).")
+    if any(r.scenario == EXTREME for r in runs):
+        c = _pick(runs, EXTREME, "combined").summary
+        lines.append(f"- Extreme case ({EXTREME}: τ = {c['tau_s']:.2f} s, ν = {c['nu']:.2f} here, {c['paper_nu']:.2f} in "
+                     f"the paper), combined: {c['outcome']}, clearance {_fmt(c['min_clearance_m'])} m, max abs δ "
+                     f"{c['max_abs_steer_rad']:.2f} rad, max abs β {c['max_abs_sideslip_rad']:.2f} rad, mean w_MPC "
+                     f"{_fmt(c['mean_weight_mpc'])}; the MPC alone: " + ", ".join(
+                         f"{r.summary['outcome']} ({r.solver})" for r in runs if r.scenario == EXTREME and r.planner == "mpc")
+                     + " (the paper: a collision).")
+    shares = [r.summary["mean_weight_mpc"] or 0.0 for r in runs
+              if r.label == "combined" and r.scenario in RELAXED_5 + SIX]
+    if shares:
+        lines.append(f"- Mean w_MPC of the combined planner in the relaxed 5 and 6 m/s cases: {min(shares):.2f}–"
+                     f"{max(shares):.2f}: the blend is the MSF planner's almost throughout.")
+    held = sum(c.holds for c in found)
+    lines.append(f"- The paper's claims: {held} of {len(found)} hold, {len(found) - held} are contradicted "
+                 "(docs/design.md, \"The paper's claims\").")
+    return "\n".join(lines)
+
+
 CALIBRATION_MU = (0.25, 0.30, PAPER_FRICTION, 0.35, 0.5, 0.8)
 """Frictions of the calibration table."""
 
@@ -226,11 +256,21 @@ def render_calibration(vehicle: Any) -> str:
     return "\n".join(lines)
 
 
+def _pattern(name: str) -> re.Pattern[str]:
+    return re.compile(rf"(<!-- BEGIN {re.escape(name)} -->\n).*?(<!-- END {re.escape(name)} -->)", re.S)
+
+
+def blocks_in(path: Path, names: Iterable[str]) -> list[str]:
+    """Which of the generated blocks ``names`` the file ``path`` holds."""
+    text = path.read_text(encoding="utf-8")
+    return [name for name in names if _pattern(name).search(text)]
+
+
 def update_document(path: Path, blocks: dict[str, str]) -> None:
     """Replace each ``<!-- BEGIN name -->`` … ``<!-- END name -->`` block of ``path`` with its new text."""
     text = path.read_text(encoding="utf-8")
     for name, body in blocks.items():
-        pattern = re.compile(rf"(<!-- BEGIN {re.escape(name)} -->\n).*?(<!-- END {re.escape(name)} -->)", re.S)
+        pattern = _pattern(name)
         if not pattern.search(text):
             raise ValueError(f"{path}: no '<!-- BEGIN {name} -->' ... '<!-- END {name} -->' block")
         text = pattern.sub(lambda m: m.group(1) + body.rstrip("\n") + "\n" + m.group(2), text)
