@@ -33,7 +33,8 @@ class CanBridge(GraphNode):
         p = self.params
         bus = BusParams(**{k: v for k, v in (("interface", p.can_interface), ("channel", p.can_channel),
                                              ("port", p.can_port)) if v is not None})
-        params = BridgeParams(guard=GuardParams.from_vehicle(self.config.vehicle, timeout=p.command_timeout), bus=bus)
+        params = BridgeParams(guard=GuardParams.from_vehicle(self.config.vehicle, timeout=p.command_timeout,
+                                                         maneuver=self.config.minimum_risk), bus=bus)
         self.simulated = bool(getattr(rt, "use_sim_time", False))
         self.runner = BridgeRunner(params, log=p.can_log, clock=rt.now if self.simulated else time.monotonic)
         self.pub = sensor_publishers(rt, rt.now())
