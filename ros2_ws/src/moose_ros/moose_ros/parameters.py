@@ -118,14 +118,6 @@ class PlannerNodeParams(ScenarioParams):
 
 
 @dataclasses.dataclass(frozen=True)
-class WeightFblParams(NodeParams):
-    """``weight_fbl``; the planner mode is the core's ``simulation.planner``."""
-
-    mpc_timeout: float = _checked(0.1, positive, "a positive time (s)")
-    """With no MPC plan for this long plus one planning slot (0.2 s), blend with a failed MPC (MSF only)."""
-
-
-@dataclasses.dataclass(frozen=True)
 class CanBridgeParams(CanBusParams):
     """``can_bridge``."""
 
@@ -141,7 +133,7 @@ NODE_PARAMETERS: dict[str, type[NodeParams]] = {
     "obstacle_detector": NodeParams,
     "mpc_planner": PlannerNodeParams,
     "msf_planner": PlannerNodeParams,
-    "weight_fbl": WeightFblParams,
+    "weight_fbl": NodeParams,  # the planner mode is the core's simulation.planner; deadlines are the graph's
     "motion_controller": NodeParams,
     "can_bridge": CanBridgeParams,
 }

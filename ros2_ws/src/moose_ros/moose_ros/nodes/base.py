@@ -1,19 +1,83 @@
-"""What every node shares: the runtime node, its typed parameters, and the 1 Hz diagnostics heartbeat."""
+"""What every node shares: the runtime node, its typed parameters, supervised inputs and the diagnostics heartbeat.
+
+**Supervision.**  Every node watches the freshness of its inputs (:class:`InputWatch`): an input whose last
+sample arrived longer ago than its topic's deadline (:attr:`moose_ros.graph.Topic.deadline`, derived from the
+designed rate) is *stale*; an input never received is stale :data:`~moose_ros.graph.STARTUP_GRACE` after the
+node's clock started.  The node's :meth:`GraphNode.supervise` runs every
+:data:`~moose_ros.graph.SUPERVISION_PERIOD` on the node's clock (simulated time with ``use_sim_time``, else
+the monotonic clock), hands the stale set to :meth:`GraphNode.on_inputs` (each node decides what a stale
+input means for its job) and measures the node's own executor: a gap between two supervision cycles longer
+than :data:`~moose_ros.graph.CYCLE_DEADLINE` is a deadline miss, longer than
+:data:`~moose_ros.graph.STALL_TIME` a stall (SIGSTOP, a hung callback, a starved CPU), both counted.
+
+**Diagnostics.**  The status on /diagnostics is the node's own (``level``, ``message``, ``values``, set by
+its job) combined with its current *problems* (:meth:`GraphNode.problem`): the highest level wins, the
+messages are joined, and ``values`` carries ``problems`` (the problem keys, e.g. ``stale:/perception/state``,
+``minimum_risk``), each problem's text under its key, ``deadline_misses``, ``stalls`` and ``longest_gap_ms``.  It is published once a second
+and at once whenever its level changes, so a node that reacts to another's health (the motion controller)
+hears of an error within one supervision cycle.  Levels: OK; WARN — degraded, the node still does its job
+(a planner fell back, a slow cycle); ERROR — the node cannot do its job, and who depends on it must not
+rely on its output.
+"""
 from __future__ import annotations
 
-from typing import Any, Callable
+import time
+from typing import Any, Callable, Iterable, Optional
 
 from .. import convert as cv
-from ..graph import DIAGNOSTICS, TF_STATIC
+from ..graph import (CLOCK, CYCLE_DEADLINE, DIAGNOSTICS, STALL_TIME, STARTUP_GRACE, SUPERVISION_PERIOD, TF_STATIC, Topic,
+                     subscribes)
 from ..parameters import node_parameters
 
 OK, WARN, ERROR = 0, 1, 2
 """diagnostic_msgs/DiagnosticStatus levels."""
 
 
+class InputWatch:
+    """When each input last arrived (on the node's clock) and which inputs are past their deadline."""
+
+    def __init__(self, topics: Iterable[Topic], grace: float = STARTUP_GRACE) -> None:
+        self.deadlines = {t.name: t.deadline for t in topics if t.deadline is not None}
+        """Topic name → deadline (s)."""
+        self.grace = grace
+        self.last: dict[str, float] = {}
+        self.start: Optional[float] = None
+        """When supervision started (the node's first supervision cycle)."""
+
+    def seen(self, name: str, now: float) -> None:
+        """A sample of ``name`` arrived at ``now``."""
+        self.last[name] = now
+
+    def age(self, name: str, now: float) -> Optional[float]:
+        """Time since the last sample of ``name`` (s); ``None`` if none arrived yet."""
+        last = self.last.get(name)
+        return None if last is None else now - last
+
+    def stale(self, now: float, names: Optional[Iterable[str]] = None) -> dict[str, Optional[float]]:
+        """The stale inputs among ``names`` (default: all supervised) → their age (``None``: never received,
+        and the startup grace is over)."""
+        if self.start is None:
+            self.start = now
+        out: dict[str, Optional[float]] = {}
+        for name in self.deadlines if names is None else names:
+            age = self.age(name, now)
+            if age is None:
+                if now - self.start > self.grace:
+                    out[name] = None
+            elif age > self.deadlines[name] + 1e-9:
+                out[name] = age
+        return out
+
+
+def describe_stale(name: str, age: Optional[float], deadline: float) -> str:
+    """``/perception/state stale (0.12 s > 0.05 s)`` or ``/perception/state never received``."""
+    return f"{name} never received" if age is None else f"{name} stale ({age:.2f} s > {deadline:g} s)"
+
+
 class GraphNode:
     """Runtime node ``rt``, the core's configuration and the node's own parameters (both validated:
-    :func:`moose_ros.parameters.node_parameters`), and a 1 Hz diagnostics heartbeat."""
+    :func:`moose_ros.parameters.node_parameters`), supervised inputs and the diagnostics heartbeat (see the
+    module docstring)."""
 
     name = "node"
 
@@ -25,13 +89,107 @@ class GraphNode:
         # transient local: a late joiner (the simulator waiting for the graph) sees each node's last status
         self._diag = DIAGNOSTICS.publisher(rt)
         self.level, self.message, self.values = OK, "running", {}
+        self.problems: dict[str, tuple[int, str]] = {}
+        """Current problems: key → (level, text); see :meth:`problem`."""
+        # /clock is the runtime's (with simulated time, a silent clock stops every deadline with it); /diagnostics
+        # is health, not data (the motion controller supervises it itself)
+        self.inputs = InputWatch(t for t in subscribes(self.name) if t not in (CLOCK, DIAGNOSTICS))
+        self.deadline_misses = 0
+        """Executor cycles later than CYCLE_DEADLINE, plus what the node counts itself (a planning slot over
+        budget, a late control cycle)."""
+        self.stalls = 0
+        self.longest_gap = 0.0
+        self._last_cycle: Optional[float] = None
+        self._published_level: Optional[int] = None
         rt.timer(1.0, self.publish_diagnostics)
+        rt.timer(SUPERVISION_PERIOD, self.supervise)
+
+    def clock(self) -> float:
+        """The node's clock for deadlines (s): simulated time with ``use_sim_time``, else the monotonic clock
+        (immune to wall-clock steps)."""
+        return self.rt.now() if getattr(self.rt, "use_sim_time", False) else time.monotonic()
+
+    def subscribe(self, topic: Topic, callback: Callable[[Any], None]) -> Any:
+        """Subscribe to ``topic`` with its subscribers' QoS; each arrival is noted for :attr:`inputs`."""
+        name = topic.name
+
+        def on_message(msg: Any) -> None:
+            self.inputs.seen(name, self.clock())
+            callback(msg)
+
+        return topic.subscription(self.rt, on_message)
+
+    # -- supervision ------------------------------------------------------------------------
+
+    def supervise(self) -> None:
+        """One supervision cycle: the node's own executor gap, then the stale inputs to :meth:`on_inputs`."""
+        now = self.clock()
+        if self._last_cycle is not None:
+            gap = now - self._last_cycle
+            self.longest_gap = max(self.longest_gap, gap)
+            if gap > STALL_TIME:
+                self.stalls += 1
+                self.deadline_misses += 1
+                self.rt.log_warn(f"no executor cycle for {gap:.2f} s (stalled or starved)")
+            elif gap > CYCLE_DEADLINE:
+                self.deadline_misses += 1
+        self._last_cycle = now
+        self.on_inputs(self.inputs.stale(now), now)
+        self._publish_on_change()
+
+    def on_inputs(self, stale: dict[str, Optional[float]], now: float) -> None:
+        """React to the stale inputs (name → age, ``None``: never received).  Default: each stale input is a
+        WARN problem; nodes that cannot work without an input raise it to ERROR (and act)."""
+        self.report_stale(stale, WARN)
+
+    def report_stale(self, stale: dict[str, Optional[float]], level: int,
+                     levels: Optional[dict[str, int]] = None, names: Optional[Iterable[str]] = None) -> None:
+        """Set a ``stale:TOPIC`` problem for each stale input among ``names`` (default: all supervised), at
+        ``levels[TOPIC]`` or ``level``; clear the others."""
+        for name in self.inputs.deadlines if names is None else names:
+            key, deadline = f"stale:{name}", self.inputs.deadlines[name]
+            if name in stale:
+                self.problem(key, (levels or {}).get(name, level), describe_stale(name, stale[name], deadline))
+            else:
+                self.problem(key, None)
+
+    def problem(self, key: str, level: Optional[int], text: str = "") -> None:
+        """Set problem ``key`` at ``level`` with ``text``, or clear it (``level=None``)."""
+        if level is None:
+            if self.problems.pop(key, None) is not None:
+                self.rt.log_info(f"recovered: {key}")
+            return
+        previous = self.problems.get(key)
+        self.problems[key] = (level, text)
+        if previous is None or previous[0] != level:
+            (self.rt.log_error if level >= ERROR else self.rt.log_warn)(text)
+
+    def status(self) -> tuple[int, str, dict[str, Any]]:
+        """The combined status: (level, message, values) of the job and the problems."""
+        level = max([self.level, *(lv for lv, _ in self.problems.values())])
+        texts = [text for _lv, text in sorted(self.problems.values(), key=lambda p: -p[0])]
+        message = "; ".join(texts) if texts else self.message
+        if texts and self.message not in ("running",):
+            message = f"{self.message}; {message}"
+        values = dict(self.values)
+        values.update(problems=",".join(sorted(self.problems)), deadline_misses=self.deadline_misses,
+                      stalls=self.stalls, longest_gap_ms=f"{1e3 * self.longest_gap:.0f}")
+        values.update({key: text for key, (_level, text) in self.problems.items()})
+        return level, message, values
+
+    def _publish_on_change(self) -> None:
+        if self.status()[0] != self._published_level:
+            self.publish_diagnostics()
+
+    # -- life cycle -------------------------------------------------------------------------
 
     def close(self) -> None:
         """Release what the node holds beyond its runtime entities (a bus, a thread); called once at shutdown."""
 
     def publish_diagnostics(self) -> None:
-        self._diag(cv.diagnostic_to_msg(self.rt, self.rt.now(), self.name, self.level, self.message, self.values))
+        level, message, values = self.status()
+        self._published_level = level
+        self._diag(cv.diagnostic_to_msg(self.rt, self.rt.now(), self.name, level, message, values))
 
     def table(self) -> Any:
         """The maximum steering table of the vehicle the stack believes in (the planning μ; detector, MSF planner)."""

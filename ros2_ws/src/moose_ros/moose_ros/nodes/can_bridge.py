@@ -10,7 +10,7 @@ node's clock and the command frames go out from the node's 10 ms timer instead o
 from __future__ import annotations
 
 import time
-from typing import Any
+from typing import Any, Optional
 
 from moose.canbus.bus import BusParams
 from moose.canbus.runner import BridgeParams, BridgeRunner
@@ -38,10 +38,13 @@ class CanBridge(GraphNode):
         self.simulated = bool(getattr(rt, "use_sim_time", False))
         self.runner = BridgeRunner(params, log=p.can_log, clock=rt.now if self.simulated else time.monotonic)
         self.pub = sensor_publishers(rt, rt.now())
-        ACTUATOR_COMMAND.subscription(rt, self.on_command)
+        self.subscribe(ACTUATOR_COMMAND, self.on_command)
         rt.timer(COMMAND_PERIOD, self.tick)
         if not self.simulated:
             self.runner.start()  # the sender thread, real time; this thread runs the callbacks
+
+    def on_inputs(self, stale: dict[str, Optional[float]], now: float) -> None:
+        """The commands are the guard's to supervise: it runs the minimum-risk maneuver and says so."""
 
     def on_command(self, msg: Any) -> None:
         self.runner.command(Command(msg.steering_angle, msg.steering_rate, msg.torque_rl, msg.torque_rr))

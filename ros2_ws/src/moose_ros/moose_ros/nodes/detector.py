@@ -1,13 +1,13 @@
 """``obstacle_detector``: state + visible danger zones → /perception/threat (τ, w, ν)."""
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Optional
 
 from moose.detector import ObstacleDetector
 
 from .. import convert as cv
 from ..graph import OBSTACLES, STATE, THREAT
-from .base import GraphNode
+from .base import ERROR, GraphNode
 
 
 class Detector(GraphNode):
@@ -20,8 +20,12 @@ class Detector(GraphNode):
         self.detector = ObstacleDetector(self.config.detector, self.table())
         self.obstacles: list = []
         self.pub = THREAT.publisher(rt)
-        OBSTACLES.subscription(rt, lambda m: setattr(self, "obstacles", [cv.obstacle_from_msg(o) for o in m.obstacles]))
-        STATE.subscription(rt, self.on_state)
+        self.subscribe(OBSTACLES, lambda m: setattr(self, "obstacles", [cv.obstacle_from_msg(o) for o in m.obstacles]))
+        self.subscribe(STATE, self.on_state)
+
+    def on_inputs(self, stale: dict[str, Optional[float]], now: float) -> None:
+        """Threats follow the estimate (one per state): a stale estimate leaves no threat to publish (ERROR)."""
+        self.report_stale(stale, ERROR)
 
     def on_state(self, msg: Any) -> None:
         estimate = cv.estimate_from_msg(msg)

@@ -2,7 +2,7 @@
 /tf at the IMU rate."""
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Optional
 
 from moose.observer import StateObserver
 from moose.signals import StateEstimate
@@ -10,7 +10,7 @@ from moose.vehicle import initial_state
 
 from .. import convert as cv
 from ..graph import GPS, IMU, STATE, STEERING, TF, WHEEL_SPEEDS
-from .base import WARN, GraphNode
+from .base import ERROR, WARN, GraphNode
 
 
 class Observer(GraphNode):
@@ -27,10 +27,15 @@ class Observer(GraphNode):
         self.pub = STATE.publisher(rt)
         self.pub_tf = TF.publisher(rt)
         self.dropped = 0
-        IMU.subscription(rt, lambda m: self.feed(cv.imu_from_msg(m), True))
-        GPS.subscription(rt, lambda m: self.feed(cv.gps_from_msg(m, self.rt.now())))
-        WHEEL_SPEEDS.subscription(rt, lambda m: self.feed(cv.wheels_from_msg(m)))
-        STEERING.subscription(rt, lambda m: self.feed(cv.steering_from_msg(m)))
+        self.subscribe(IMU, lambda m: self.feed(cv.imu_from_msg(m), True))
+        self.subscribe(GPS, lambda m: self.feed(cv.gps_from_msg(m, self.rt.now())))
+        self.subscribe(WHEEL_SPEEDS, lambda m: self.feed(cv.wheels_from_msg(m)))
+        self.subscribe(STEERING, lambda m: self.feed(cv.steering_from_msg(m)))
+
+    def on_inputs(self, stale: dict[str, Optional[float]], now: float) -> None:
+        """The 100 Hz sensors are needed (without the IMU no estimate is published at all; without the wheel
+        speeds or the steering angle the estimate drifts): ERROR.  A late GPS fix only degrades (WARN)."""
+        self.report_stale(stale, ERROR, {GPS.name: WARN})
 
     def feed(self, sample: Any, publish: bool = False) -> None:
         try:

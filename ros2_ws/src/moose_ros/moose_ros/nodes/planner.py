@@ -11,7 +11,7 @@ from moose.weight import WeightFunction
 
 from .. import convert as cv
 from ..graph import BLEND, PLANS, STATE, THREAT
-from .base import OK, WARN, GraphNode
+from .base import ERROR, OK, WARN, GraphNode
 
 
 class Planner(GraphNode):
@@ -27,10 +27,18 @@ class Planner(GraphNode):
         self.threat: Optional[Threat] = None
         self.detected = False
         self.guess: Optional[np.ndarray] = None
+        self.blocked = False
+        """The estimate or the threat is stale: no plan (the plan topic falls silent, weight_fbl applies the
+        other planner's)."""
         self.pub = PLANS[self.kind].publisher(rt)
-        STATE.subscription(rt, lambda m: setattr(self, "estimate", cv.estimate_from_msg(m)))
-        THREAT.subscription(rt, self.on_threat)
+        self.subscribe(STATE, lambda m: setattr(self, "estimate", cv.estimate_from_msg(m)))
+        self.subscribe(THREAT, self.on_threat)
         rt.timer(1.0 / self.config.planning_rate_hz, self.plan)
+
+    def on_inputs(self, stale: dict[str, Optional[float]], now: float) -> None:
+        """No plan on a stale estimate or threat (ERROR); a stale blend only costs the MPC its warm start (WARN)."""
+        self.report_stale(stale, ERROR, {BLEND.name: WARN})
+        self.blocked = STATE.name in stale or THREAT.name in stale
 
     def make_planner(self) -> Any:
         raise NotImplementedError
@@ -49,11 +57,13 @@ class Planner(GraphNode):
         return self.params.v_des if self.params.v_des is not None else self.scenario.desired_speed(self.detected)
 
     def plan(self) -> None:
-        if self.estimate is None:
+        if self.estimate is None or self.blocked:
             return
         t = self.rt.now()
         inp = PlannerInput(t, self.estimate, self.threat, self.v_des, self.guess, y_lane=0.0)
         result = self.planner.plan(inp)
+        if result.solve_time_s > self.config.planning.t_s:  # the planning slot is over before the plan exists
+            self.deadline_misses += 1
         self.values = {"status": result.status, "solve_ms": f"{result.solve_time_s * 1e3:.2f}"}
         self.level = OK if result.status in ("converged", "capped", "ok", "idle") else WARN
         self.pub(cv.plan_to_msg(self.rt, t, self.kind, result))
@@ -66,7 +76,7 @@ class MpcPlannerNode(Planner):
 
     def __init__(self, rt: Any) -> None:
         super().__init__(rt)
-        BLEND.subscription(rt, lambda m: setattr(
+        self.subscribe(BLEND, lambda m: setattr(
             self, "guess", WeightFunction.next_initial_guess(Blend(m.weight_mpc, cv.blend_accel(m)))))
 
     def make_planner(self) -> Any:

@@ -7,7 +7,10 @@ from typing import Any, Optional
 
 import numpy as np
 
+from moose.canbus.safety import CommandGuard, GuardParams, GuardState
+from moose.minimum_risk import Command
 from moose.sensors import Sensors
+from moose.signals import EpsSample, WheelSpeedSample
 from moose.vehicle import VehiclePlant, initial_state
 
 from .. import convert as cv
@@ -16,23 +19,31 @@ from .base import WARN, GraphNode, sensor_publishers
 
 
 class TopicVehicleIo:
-    """The simulator's sensors and actuators as ROS topics."""
+    """The simulator's sensors and actuators as ROS topics.
+
+    The commands reach the plant through the CAN bridge's command guard
+    (:class:`moose.canbus.safety.CommandGuard`: the vehicle's limits, the command timeout and the
+    minimum-risk maneuver), which here stands in for the bridge and the ECUs behind it: a dead or stalled
+    motion controller ends in the same maneuver as in the ``can`` graph, from the EPS angle and wheel
+    speeds the simulator measures.
+    """
 
     def __init__(self, node: "VehicleSimulator") -> None:
         rt = node.rt
         self.node = node
-        self.timeout = node.params.command_timeout
-        self.u = np.zeros(3)
-        self.last_command = -math.inf
+        self.guard = CommandGuard(GuardParams.from_vehicle(node.config.vehicle, timeout=node.params.command_timeout,
+                                                           maneuver=node.config.minimum_risk), period=node.dt)
         self.pub = sensor_publishers(rt, 0.0)  # simulated time starts at 0
-        ACTUATOR_COMMAND.subscription(rt, self.on_command)
+        node.subscribe(ACTUATOR_COMMAND, self.on_command)
 
     def on_command(self, msg: Any) -> None:
-        u = np.array([msg.steering_rate, msg.torque_rl, msg.torque_rr], dtype=float)
-        self.u = u if np.all(np.isfinite(u)) else np.zeros(3)
-        self.last_command = self.node.t
+        self.guard.receive(Command(msg.steering_angle, msg.steering_rate, msg.torque_rl, msg.torque_rr))
 
     def send(self, sample: Any, t: float) -> None:
+        if isinstance(sample, EpsSample):
+            self.guard.observe_angle(sample.delta)
+        elif isinstance(sample, WheelSpeedSample):
+            self.guard.observe_wheel_speeds(sample.omega_rl, sample.omega_rr)
         publish, convert = self.pub[type(sample)]
         publish(convert(self.node.rt, sample))
 
@@ -40,11 +51,13 @@ class TopicVehicleIo:
         """Nothing to release: topics go with the node."""
 
     def command(self, t: float) -> np.ndarray:
-        if t - self.last_command <= self.timeout:
-            return self.u
-        if t > 1.0:
-            self.node.level, self.node.message = WARN, "actuator command timeout: zero torque, steering held"
-        return np.zeros(3)
+        out = self.guard.output(t)
+        if self.guard.state in (GuardState.MINIMUM_RISK, GuardState.STOPPED):
+            done = "stopped by" if self.guard.state == GuardState.STOPPED else "running"
+            self.node.problem("commands_lost", WARN, f"actuator commands lost: {done} the minimum-risk maneuver")
+        else:
+            self.node.problem("commands_lost", None)
+        return np.array([out.steering_rate, out.torque_rl, out.torque_rr])
 
 
 class CanVehicleIo:
@@ -99,9 +112,13 @@ class VehicleSimulator(GraphNode):
         self.waiting = set(self.params.wait_for)
         self.startup_deadline = self.params.startup_timeout
         self.wall_start: Optional[float] = None
-        DIAGNOSTICS.subscription(rt, self.on_diagnostics)
+        self.subscribe(DIAGNOSTICS, self.on_diagnostics)
         # wall-clock pacing: one motion step every dt / rate seconds; simulated time is published on /clock
         rt.timer(self.dt / self.params.rate, self.step)
+
+    def on_inputs(self, stale: dict[str, Optional[float]], now: float) -> None:
+        """The commands are the guard's to supervise (:class:`TopicVehicleIo`); the ECU emulator times them out
+        itself (:class:`moose.canbus.ecu.VehicleEcu`)."""
 
     def on_diagnostics(self, msg: Any) -> None:
         for status in msg.status:

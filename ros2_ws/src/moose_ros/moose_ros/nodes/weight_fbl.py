@@ -3,18 +3,26 @@ and the markers of the instant (danger zone, predicted paths).
 
 The mode switch, the blend, the FBL reference and the next initial guess are the core's planning
 step (:class:`moose.planning.PlanningStep`), the code the lockstep loop runs.
+
+Supervision: a planner whose plan topic is past its deadline (:attr:`moose_ros.graph.Topic.deadline`, two
+planning periods) is *silent*; in ``combined`` mode the other planner's plan is applied alone (WARN
+``mpc_planner silent: MSF only`` or ``msf_planner silent: MPC only``).  With no live planner of the mode,
+or a stale estimate or threat, the node publishes no reference and reports ERROR: the motion controller
+then runs the minimum-risk maneuver.
 """
 from __future__ import annotations
 
-import math
 from typing import Any, Optional
 
 from moose.planning import PlanningStep, blend_path
 from moose.signals import StateEstimate, Threat
 
 from .. import convert as cv
-from ..graph import BLEND, MARKERS, PLAN_MPC, PLAN_MSF, REFERENCE, STATE, THREAT
-from .base import OK, WARN, GraphNode
+from ..graph import BLEND, MARKERS, PLANS, PLAN_MPC, PLAN_MSF, REFERENCE, STATE, THREAT
+from .base import ERROR, WARN, GraphNode
+
+MODE_PLANNERS = {"combined": ("mpc", "msf"), "mpc": ("mpc",), "msf": ("msf",)}
+"""The planners each mode uses."""
 
 
 class WeightFbl(GraphNode):
@@ -27,45 +35,54 @@ class WeightFbl(GraphNode):
         super().__init__(rt)
         self.step = PlanningStep(self.config, planners=False)
         self.mode = self.step.mode
-        self.mpc_timeout = self.params.mpc_timeout
+        self.planners = MODE_PLANNERS[self.mode]
+        self.live: tuple[str, ...] = self.planners
+        """The mode's planners whose plans are within their deadline."""
+        self.blocked = False
+        """No reference can be made: a stale estimate or threat, or no live planner."""
         self.estimate: Optional[StateEstimate] = None
         self.threat: Optional[Threat] = None
         self.pending: dict[str, tuple[float, Any]] = {}
-        self.last_mpc = -math.inf
         self.pub_blend = BLEND.publisher(rt)
         self.pub_ref = REFERENCE.publisher(rt)
         self.pub_markers = MARKERS.publisher(rt)
-        STATE.subscription(rt, self.on_state)
-        THREAT.subscription(rt, lambda m: setattr(self, "threat", cv.threat_from_msg(m)))
-        PLAN_MPC.subscription(rt, lambda m: self.on_plan("mpc", m))
-        PLAN_MSF.subscription(rt, lambda m: self.on_plan("msf", m))
+        self.subscribe(STATE, self.on_state)
+        self.subscribe(THREAT, lambda m: setattr(self, "threat", cv.threat_from_msg(m)))
+        self.subscribe(PLAN_MPC, lambda m: self.on_plan("mpc", m))
+        self.subscribe(PLAN_MSF, lambda m: self.on_plan("msf", m))
+
+    def on_inputs(self, stale: dict[str, Optional[float]], now: float) -> None:
+        plans = [PLANS[k].name for k in self.planners]
+        self.live = tuple(k for k in self.planners if PLANS[k].name not in stale)
+        silent = [k for k in self.planners if k not in self.live]
+        self.report_stale(stale, ERROR, {name: WARN if self.live else ERROR for name in plans},
+                          names=[STATE.name, THREAT.name, *plans])
+        if silent and self.live:
+            self.problem("fallback", WARN, f"{silent[0]}_planner silent: {self.live[0].upper()} only")
+        else:
+            self.problem("fallback", None)
+        self.blocked = STATE.name in stale or THREAT.name in stale or not self.live
+        if self.pending:
+            self.try_blend()
 
     def on_plan(self, kind: str, msg: Any) -> None:
         self.pending[kind] = (cv.time_of(msg), cv.plan_from_msg(msg))
-        if kind == "mpc":
-            self.last_mpc = self.rt.now()
         self.try_blend()
 
     def try_blend(self) -> None:
-        """Combine when the mode's plans of one instant are here (or the MPC stayed silent past its deadline)."""
-        if self.estimate is None:
+        """Combine when the live planners' plans of one instant are here."""
+        if self.estimate is None or self.blocked:
             return
-        mpc, msf = self.pending.get("mpc"), self.pending.get("msf")
-        silent = False
-        if self.mode == "mpc" and mpc:
-            t, plans = mpc[0], (mpc[1], None)
-        elif self.mode == "msf" and msf:
-            t, plans = msf[0], (None, msf[1])
-        elif self.mode == "combined" and msf and mpc and abs(mpc[0] - msf[0]) < 1e-6:
-            t, plans = msf[0], (mpc[1], msf[1])
-        elif self.mode == "combined" and msf and self.rt.now() - self.last_mpc > self.mpc_timeout + 0.2:
-            t, plans, silent = msf[0], (None, msf[1]), True  # the MPC is silent: weight 0, and say so
-        else:
+        mpc, msf = (self.pending.get(k) if k in self.live else None for k in ("mpc", "msf"))
+        if self.live == ("mpc", "msf"):
+            if not (mpc and msf and abs(mpc[0] - msf[0]) < 1e-6):
+                return
+        elif not (mpc or msf):
             return
-        record = self.step.combine(t, self.estimate, self.threat, *plans)
-        self.level, self.message = (WARN, "mpc_planner silent: MSF only") if silent else (OK, "running")
+        t = (msf or mpc)[0]  # type: ignore[index]
+        record = self.step.combine(t, self.estimate, self.threat, mpc[1] if mpc else None, msf[1] if msf else None)
         self.pending.clear()
-        self.values = {"weight_mpc": f"{record.blend.weight_mpc:.3f}"}
+        self.values = {"weight_mpc": f"{record.blend.weight_mpc:.3f}", "planners": ",".join(self.live)}
         self.pub_blend(cv.blend_to_msg(self.rt, t, record.blend, record.reference, record.delta_mpc))
         self.pub_ref(cv.reference_to_msg(self.rt, t, record.reference))
         self.pub_markers(cv.markers_to_msg(self.rt, t, record.threat, record.mpc, record.msf,
@@ -73,8 +90,8 @@ class WeightFbl(GraphNode):
 
     def on_state(self, msg: Any) -> None:
         self.estimate = cv.estimate_from_msg(msg)
-        if "msf" in self.pending and self.mode == "combined":
+        if self.pending:
             self.try_blend()
         reference = self.step.reference_between(self.estimate)
-        if reference is not None and self.config.simulation.steering_fbl_at_motion_rate:
+        if reference is not None and not self.blocked:  # per estimate (the topic's designed rate)
             self.pub_ref(cv.reference_to_msg(self.rt, self.estimate.t, reference))
