@@ -22,6 +22,7 @@ from moose.params import ParamError
 from moose.scenario import load_scenario
 from moose.simulation import simulate
 from moose.config import load_config
+from moose_ros.faults import Fault
 from moose_ros.launch import launch
 from moose_ros.runtime import DdsNode
 
@@ -156,7 +157,7 @@ def test_killed_planner_is_reported_and_the_graph_keeps_running() -> None:
     scenario = load_scenario("paper_v6_w2.0")
     out = io.StringIO()
     summary = launch(scenario, {"scenario": "paper_v6_w2.0", "duration": 4.0},
-                     kill_after=("mpc_planner", 2.0), out=out)  # killed 1 s after the obstacle appeared
+                     faults=[Fault("mpc_planner", "kill", 2.0)], out=out)  # killed 1 s after the obstacle appeared
     assert summary["node_exits"]["mpc_planner"] == -9
     assert "node mpc_planner exited with status -9" in out.getvalue()
     assert summary["diagnostics"]["weight_fbl"]["level"] == 1

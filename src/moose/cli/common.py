@@ -11,6 +11,29 @@ DEFAULT_SCENARIO = "paper_v7_tau1.4"
 """The paper's extreme case (7 m/s, τ = 1.4 s, ν ≈ 0.95): the main job."""
 
 
+EXIT_CLEAR = 0
+"""The run was ``clear`` (and, for other commands, everything worked)."""
+EXIT_FAILED = 1
+"""The run failed: ``collision``, ``left_field``, ``lost_control`` or ``stopped_short``.  Bag tools: the command
+ran, but some data could not be read (each loss is reported on stderr)."""
+EXIT_BAD_INPUT = 2
+"""Bad input (``moose: error: …``): nothing was run."""
+EXIT_INCOMPLETE = 3
+"""The run is ``incomplete``: its data do not cover it (cut short, a stalled simulator)."""
+EXIT_INTERRUPTED = 130
+"""Ctrl-C (128 + SIGINT)."""
+
+OUTCOME_EXIT: dict[str, int] = {"clear": EXIT_CLEAR, "collision": EXIT_FAILED, "left_field": EXIT_FAILED,
+                                "lost_control": EXIT_FAILED, "stopped_short": EXIT_FAILED,
+                                "incomplete": EXIT_INCOMPLETE}
+"""The exit status of each outcome of :data:`moose.verdict.OUTCOMES` (``moose simulate``, ``moose launch``)."""
+
+EXIT_DEGRADED = 4
+"""``moose launch``: the outcome was ``clear``, but the run was degraded — a node failed to start, died, stalled
+or was stopped by a fault, or the graph fell back (a planner replaced, a minimum-risk maneuver): the car came
+through, the system did not (:mod:`moose_ros.incidents`)."""
+
+
 def positive_float(text: str) -> float:
     """argparse type: a positive number."""
     try:

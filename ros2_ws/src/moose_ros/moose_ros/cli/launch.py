@@ -1,4 +1,10 @@
-"""``moose launch [GRAPH]``: run the whole node graph as separate processes, summarised like ``moose simulate``."""
+"""``moose launch [GRAPH]``: run the whole node graph as separate processes, summarised like ``moose simulate``.
+
+Exit status: 0 ``clear``; 1 a failure outcome (``collision``, ``left_field``, ``lost_control``,
+``stopped_short``); 2 bad input (nothing started); 3 ``incomplete`` (too little odometry, or the run was cut
+short: SIGTERM, a node that failed to start, the simulator gone); 4 ``clear`` but degraded (a node failed,
+stalled or was faulted, a fallback or a minimum-risk maneuver ran); 130 Ctrl-C.
+"""
 from __future__ import annotations
 
 import argparse
@@ -24,6 +30,9 @@ def add_subparser(subparsers: Any) -> None:
     launch.add_argument("--can-port", type=int, help="UDP port of udp_multicast (default: moose.canbus.bus.DEFAULT_PORT)")
     add_scenario_arguments(launch)
     launch.add_argument("--rate", type=positive_float, default=1.0, help="simulated seconds per wall-clock second")
+    launch.add_argument("--fault", action="append", default=[], metavar="NODE:kill@T|NODE:stall@T:D",
+                        help="inject a fault: SIGKILL NODE at simulated time T, or SIGSTOP it at T for D simulated "
+                             "seconds (repeatable)")
     launch.add_argument("--json", help="write the summary as JSON to this path")
     launch.add_argument("--bag", help="record every topic into this bag directory (default: a new folder under runs/)")
     launch.add_argument("--no-bag", action="store_true", help="do not record a bag")
@@ -36,6 +45,7 @@ def add_subparser(subparsers: Any) -> None:
 
 def cmd_launch(args: argparse.Namespace) -> int:
     from ..bag import BagError
+    from ..faults import Fault
     from ..launch import launch, planner_mode
     from ..parameters import ScenarioParams
 
@@ -45,18 +55,43 @@ def cmd_launch(args: argparse.Namespace) -> int:
     params.update({f"can_{k}": getattr(args, f"can_{k}") for k in ("interface", "channel", "port")
                    if getattr(args, f"can_{k}") is not None})
     planner = planner_mode(args.planner, args.config)
+    faults = [Fault.parse(text) for text in args.fault]
     bag = None if args.no_bag else (Path(args.bag) if args.bag else run_folder(scenario.name, planner) / "bag")
     try:
         summary = launch(scenario, params, graph=args.graph, planner=planner, seed=args.seed, params_file=args.config,
-                         rate=args.rate, bag=bag,
+                         rate=args.rate, bag=bag, faults=faults,
                          foxglove=(args.foxglove_host, args.foxglove) if args.foxglove is not None else None)
     except BagError as exc:
         raise ParamError(str(exc)) from None
-    print(format_summary(summary))
-    print(f"node exits      {summary['node_exits']}")
+    print(format_launch_summary(summary))
     if bag is not None:
         print(f"bag             {bag}")
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
-    return 0
+    return int(summary["exit_status"])
+
+
+def format_launch_summary(summary: dict[str, Any]) -> str:
+    """The summary of ``moose simulate`` (when there is odometry to summarise) and what only the graph has:
+    the verdict, each node's end, the incidents, the real-time factor and the exit status."""
+    lines = [f"verdict         {summary['outcome'].upper()}: {summary['reason']}"]
+    if summary["odom_samples"]:
+        lines.append(format_summary(summary))
+    else:
+        lines.append("odometry        none: nothing to judge (incomplete)")
+    lines.append("nodes           " + ", ".join(f"{name} {end} ({summary['node_exits'].get(name)})"
+                                                for name, end in summary["node_status"].items()))
+    rtf = summary["real_time_factor"]
+    achieved = "n/a" if rtf["achieved"] is None else f"{rtf['achieved']:.2f}"
+    lines.append(f"real time       --rate {rtf['requested']:g}, achieved {achieved}")
+    misses = {n: c for n, c in summary["deadline_misses"].items() if c}
+    lines.append(f"deadline misses {misses or 'none'}")
+    lines.append(f"incidents       {len(summary['incidents'])}"
+                 + (" (degraded)" if summary["degraded"] else ""))
+    for incident in summary["incidents"]:
+        t = "     " if incident["t"] is None else f"{incident['t']:5.2f}"
+        more = f" (+{incident['repeats']} more)" if incident["repeats"] else ""
+        lines.append(f"  {t} s  {incident['node']:<18} {incident['kind']:<16} {incident['message']}{more}")
+    lines.append(f"exit status     {summary['exit_status']}")
+    return "\n".join(lines)
