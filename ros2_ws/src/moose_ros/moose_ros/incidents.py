@@ -104,7 +104,8 @@ class IncidentLog:
             self.add(t, node, "stalled", f"no executor cycle for up to {counters.get('longest_gap_ms', 0):.0f} ms "
                                          "(stalled or starved)")
         self.counters[node] = {**previous, **counters}
-        if not problems and level >= 1 and (level, message) != self._last.get(node):  # a status without problem keys
+        if (not problems and level >= 1 and (level, message) != self._last.get(node)  # a status without problem keys
+                and not message.startswith("stopped")):  # (a node's last status, at its end, says "stopped")
             kind = "minimum_risk" if "minimum-risk" in message else ("error" if level >= 2 else "warning")
             self.add(t, node, kind, message)
         self._last[node] = (level, message)

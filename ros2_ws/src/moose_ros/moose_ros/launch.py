@@ -300,7 +300,10 @@ def launch(
             procs[name] = proc
             threading.Thread(target=stream, args=(name, proc), daemon=True).start()
         start = time.monotonic()
-        limit = start + (duration if duration is not None else (scenario.lead_time + scenario.duration) / rate + 60.0)
+        planned = scenario.lead_time + scenario.duration
+        # with the simulator: its run at ``rate`` plus its start-up (it waits up to a minute for the nodes); without
+        # (the car): the planned run on the wall clock
+        limit = start + (duration if duration is not None else planned / rate + 60.0 if simulated else planned)
         while not stop.is_set() and time.monotonic() < limit:
             node.spin_once(0.05)
             t_sim = monitor.sim_time
@@ -437,8 +440,9 @@ def _summary(monitor: Monitor, planner: str, seed: int, rate: float, exits: dict
         log.add(None, "vehicle_simulator", "rate_not_held",
                 f"--rate {rate:g} not held: achieved {achieved:.2f} (below {RATE_TOLERANCE:g} × requested)")
     summary = summarize(monitor.result(planner, seed))
-    if cut_short and summary["outcome"] in ("clear", "stopped_short"):  # never a success from a run cut short
-        summary["outcome"], summary["complete"] = "incomplete", False
+    if cut_short:
+        if summary["outcome"] in ("clear", "stopped_short"):  # never a success from a run cut short
+            summary["outcome"], summary["complete"] = "incomplete", False
         summary["reason"] = f"the run was cut short ({cut_short}); {summary['reason']}"
     last = monitor.odom[-1] if monitor.odom else None
     summary.update(

@@ -100,7 +100,9 @@ class GraphNode:
         self.stalls = 0
         self.longest_gap = 0.0
         self._last_cycle: Optional[float] = None
+        self._deferred = False
         self._published_level: Optional[int] = None
+        self._published_stalls = 0
         rt.timer(1.0, self.publish_diagnostics)
         rt.timer(SUPERVISION_PERIOD, self.supervise)
 
@@ -124,17 +126,23 @@ class GraphNode:
     def supervise(self) -> None:
         """One supervision cycle: the node's own executor gap, then the stale inputs to :meth:`on_inputs`."""
         now = self.clock()
-        if self._last_cycle is not None:
-            gap = now - self._last_cycle
-            self.longest_gap = max(self.longest_gap, gap)
-            if gap > STALL_TIME:
-                self.stalls += 1
-                self.deadline_misses += 1
-                self.rt.log_warn(f"no executor cycle for {gap:.2f} s (stalled or starved)")
-            elif gap > CYCLE_DEADLINE:
-                self.deadline_misses += 1
+        gap = 0.0 if self._last_cycle is None else now - self._last_cycle
         self._last_cycle = now
-        self.on_inputs(self.inputs.stale(now), now)
+        self.longest_gap = max(self.longest_gap, gap)
+        if gap > STALL_TIME:
+            self.stalls += 1
+            self.rt.log_warn(f"no executor cycle for {gap:.2f} s (stalled or starved)")
+        late = gap > CYCLE_DEADLINE
+        if late:
+            self.deadline_misses += 1
+        if late and not self._deferred:
+            # this node was late itself: what waits in its readers has not been taken yet, so its inputs are
+            # judged in the next cycle, after the executor has run their callbacks (once: a node late every
+            # cycle still judges every other one)
+            self._deferred = True
+        else:
+            self._deferred = False
+            self.on_inputs(self.inputs.stale(now), now)
         self._publish_on_change()
 
     def on_inputs(self, stale: dict[str, Optional[float]], now: float) -> None:
@@ -178,7 +186,8 @@ class GraphNode:
         return level, message, values
 
     def _publish_on_change(self) -> None:
-        if self.status()[0] != self._published_level:
+        """Publish now when the level changed or the node noticed a stall of its own."""
+        if self.status()[0] != self._published_level or self.stalls != self._published_stalls:
             self.publish_diagnostics()
 
     # -- life cycle -------------------------------------------------------------------------
@@ -188,7 +197,7 @@ class GraphNode:
 
     def publish_diagnostics(self) -> None:
         level, message, values = self.status()
-        self._published_level = level
+        self._published_level, self._published_stalls = level, self.stalls
         self._diag(cv.diagnostic_to_msg(self.rt, self.rt.now(), self.name, level, message, values))
 
     def table(self) -> Any:
