@@ -5,7 +5,7 @@ Incidents come from two sources, both recorded by ``moose launch``:
 * **/diagnostics** (:meth:`IncidentLog.on_status`): every node publishes its status once a second and at
   once when its level changes (:mod:`moose_ros.nodes.base`); a new *problem* key in its ``problems``
   value becomes an incident (``stale:TOPIC`` → ``input_stale``, ``minimum_risk``/``commands_lost`` →
-  ``minimum_risk``, ``fallback`` → ``planner_fallback``), a rise of its ``stalls`` counter a ``stalled``
+  ``minimum_risk``, ``fallback`` → ``planner_fallback``, ``ecu_timeout``), a rise of its ``stalls`` counter a ``stalled``
   incident, any other new WARN or ERROR message a ``warning`` or ``error``; the counters
   ``deadline_misses`` and ``stalls`` are kept per node.
 * **the processes and the clock**: a node that exits before it announced itself ``failed_to_start``, one
@@ -32,6 +32,8 @@ KINDS = {
     "input_stale": "an input of a node passed its deadline",
     "minimum_risk": "a minimum-risk maneuver ran (motion controller, the simulator's or the CAN bridge's guard)",
     "planner_fallback": "weight_fbl applied one planner's plan alone",
+    "ecu_timeout": "the vehicle-side ECUs received no commands (the CAN graph without a bridge): zero torque, the "
+                   "steering held — nothing of the stack controls the car",
     "deadline_missed": "executor cycles, planning slots or control cycles over their deadline (counted)",
     "input_dropped": "invalid samples dropped by a node",
     "rate_not_held": "the achieved real-time factor fell below the requested one",
@@ -42,7 +44,7 @@ KINDS = {
 """Every kind of incident and what it means."""
 
 DEGRADING = frozenset({"failed_to_start", "died", "fault_injected", "stalled", "input_stale", "minimum_risk",
-                       "planner_fallback", "cut_short", "error"})
+                       "planner_fallback", "ecu_timeout", "cut_short", "error"})
 """Kinds that make a run degraded."""
 
 RATE_TOLERANCE = 0.9
@@ -52,7 +54,7 @@ MAX_PER_KIND = 20
 """Incidents recorded per node and kind; more are counted in the last one's ``repeats``."""
 
 _PROBLEM_KINDS = {"stale": "input_stale", "minimum_risk": "minimum_risk", "commands_lost": "minimum_risk",
-                  "fallback": "planner_fallback", "invalid": "input_dropped"}
+                  "fallback": "planner_fallback", "ecu_timeout": "ecu_timeout", "invalid": "input_dropped"}
 """Problem key (before ``:``) → incident kind."""
 
 

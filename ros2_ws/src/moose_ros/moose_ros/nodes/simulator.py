@@ -66,8 +66,10 @@ class CanVehicleIo:
     def __init__(self, node: "VehicleSimulator") -> None:
         from moose.canbus.ecu import VehicleEcu
 
+        self.node = node
         self.bus = node.params.open_bus(node.name)
         self.ecu = VehicleEcu(timeout=node.params.command_timeout)
+        self.commanded = False
 
     def send(self, sample: Any, t: float) -> None:
         for frame in self.ecu.encode(sample, t):
@@ -79,6 +81,13 @@ class CanVehicleIo:
     def command(self, t: float) -> np.ndarray:
         while (frame := self.bus.recv(timeout=0.0)) is not None:
             self.ecu.on_frame(frame, t)
+        alive = self.ecu.steering_alive(t) and self.ecu.torque_alive(t)
+        self.commanded = self.commanded or alive
+        if self.commanded and not alive:  # no bridge on the bus: the car is the ECUs' own, not the stack's
+            self.node.problem("ecu_timeout", WARN, "vehicle ECUs' command timeout: zero torque, EPS stopped "
+                                                   "(steering held); the stack no longer controls the car")
+        else:
+            self.node.problem("ecu_timeout", None)
         return self.ecu.plant_input(t)
 
 
