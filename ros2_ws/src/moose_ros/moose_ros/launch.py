@@ -92,9 +92,8 @@ class Monitor:
         yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
         t = cv.time_of(m)
         self.odom.append((t, p.x, p.y, yaw, v.x, v.y, self.delta))
-        self.pace[1:] = [(time.monotonic(), t)]
-        if len(self.pace) == 1:
-            self.pace.insert(0, self.pace[0])
+        now = (time.monotonic(), t)
+        self.pace = [self.pace[0] if self.pace else now, now]
 
     @property
     def sim_time(self) -> Optional[float]:
