@@ -107,24 +107,26 @@ def test_a_domain_with_nodes_of_another_graph_is_refused() -> None:
     assert leftover.returncode == 0  # SIGTERM ends a node normally
 
 
-def test_sigterm_to_the_launcher_is_incomplete_and_every_node_ends_normally(launcher: list[Launcher],
-                                                                             tmp_path: Path) -> None:
-    """Review: SIGTERM to the launcher was reported as collision-free, exit status 0."""
+@pytest.mark.parametrize("sig, status", [(signal.SIGTERM, 3), (signal.SIGINT, 130)], ids=["SIGTERM", "SIGINT"])
+def test_a_signal_to_the_launcher_is_incomplete_and_every_node_ends_normally(launcher: list[Launcher], tmp_path: Path,
+                                                                             sig: signal.Signals, status: int) -> None:
+    """Review: SIGTERM to the launcher was reported as collision-free, exit status 0.  Now the run is incomplete:
+    exit status 3, or 130 for Ctrl-C (SIGINT to the launcher alone, as a supervisor would send it)."""
     summary_path = tmp_path / "summary.json"
     run = Launcher(["--scenario", "paper_v5_tau3", "--no-bag", "--json", str(summary_path)])
     launcher.append(run)
     run.wait_started(NODES_FULL)
     time.sleep(4.0)  # a few simulated seconds (the simulator starts the clock when every node announced itself)
-    run.proc.send_signal(signal.SIGTERM)
-    assert run.proc.wait(60) == 3, run.output()[-3000:]
+    run.proc.send_signal(sig)
+    assert run.proc.wait(60) == status, run.output()[-3000:]
     summary = json.loads(summary_path.read_text())
-    assert summary["outcome"] == "incomplete" and summary["interrupted"] == "SIGTERM"
-    assert "cut short (SIGTERM to the launcher)" in summary["reason"]
+    assert summary["outcome"] == "incomplete" and summary["interrupted"] == sig.name
+    assert f"cut short ({sig.name} to the launcher)" in summary["reason"]
     assert any(i["kind"] == "cut_short" for i in summary["incidents"])
     # the nodes ended on the launcher's SIGTERM with status 0 (they were -15)
     assert summary["node_exits"] == {name: 0 for name in summary["node_exits"]} and len(summary["node_exits"]) == 7
     assert set(summary["node_status"].values()) <= {"stopped", "finished"}
-    assert "verdict         INCOMPLETE" in run.output() and "exit status     3" in run.output()
+    assert "verdict         INCOMPLETE" in run.output() and f"exit status     {status}" in run.output()
 
 
 def test_no_odometry_at_all_is_incomplete(tmp_path: Path) -> None:
@@ -173,8 +175,7 @@ def test_a_node_that_fails_to_start_ends_the_run_at_once(tmp_path: Path) -> None
 def test_a_rate_that_cannot_be_held_and_deadline_misses_are_reported() -> None:
     """Review: under load ``--rate 3`` ran at 1.7x and the command lag reached 56 ms, and nothing said so.  At
     ``--rate 25`` no machine of ours holds the pace: the summary must say so and count the misses."""
-    summary = launch(load_scenario("paper_v5_tau3"), {"scenario": "paper_v5_tau3", "duration": 2.0}, rate=25.0,
-                     out=io.StringIO())
+    summary = launch(load_scenario("paper_v5_tau3"), {"scenario": "paper_v5_tau3"}, rate=25.0, out=io.StringIO())
     achieved = summary["real_time_factor"]["achieved"]
     assert summary["real_time_factor"]["requested"] == 25.0 and achieved is not None and achieved < 22.5
     assert any(i["kind"] == "rate_not_held" for i in summary["incidents"])

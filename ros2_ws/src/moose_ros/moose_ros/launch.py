@@ -101,8 +101,9 @@ class Monitor:
         return self.odom[-1][0] if self.odom else None
 
     def real_time_factor(self) -> Optional[float]:
-        """Simulated seconds per wall-clock second between the first and the last odometry sample."""
-        if len(self.pace) < 2 or self.pace[1][0] - self.pace[0][0] < 0.5:
+        """Simulated seconds per wall-clock second between the first and the last odometry sample (``None``
+        over less than 0.2 s of wall-clock time)."""
+        if len(self.pace) < 2 or self.pace[1][0] - self.pace[0][0] < 0.2:
             return None
         return (self.pace[1][1] - self.pace[0][1]) / (self.pace[1][0] - self.pace[0][0])
 
