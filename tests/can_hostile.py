@@ -5,6 +5,7 @@ from hypothesis import strategies as st
 
 from moose.canbus.safety import GuardParams
 from moose.params import VEHICLE_LIMITS
+from moose.schema import MinimumRiskParams
 
 DT = 0.01
 
@@ -26,6 +27,7 @@ def hostile_guard_params(draw: st.DrawFn, timeout_min: float = 0.02) -> GuardPar
     return GuardParams(
         delta_max=share(VEHICLE_LIMITS.delta_max), steer_rate_limit=share(VEHICLE_LIMITS.delta_rate_max),
         torque_max=share(VEHICLE_LIMITS.T_max), torque_rate_limit=share(VEHICLE_LIMITS.torque_rate_max),
-        timeout=draw(st.floats(timeout_min, 0.05)), brake_fraction=draw(st.floats(1e-6, 1.0)),
-        brake_gain=draw(st.floats(1e-6, 1e9)), stop_speed=draw(st.floats(1e-6, 1e3)),
-        stop_time=draw(st.floats(1e-6, 10.0)), eps_gain=draw(st.floats(1e-6, 1e9)))
+        timeout=draw(st.floats(timeout_min, 0.05)), maneuver=MinimumRiskParams(
+            brake_fraction=draw(st.floats(1e-6, 1.0)), brake_gain=draw(st.floats(1e-6, 1e9)),
+            stop_speed=draw(st.floats(1e-6, 1e3)), stop_time=draw(st.floats(1e-6, 10.0)),
+            eps_gain=draw(st.floats(1e-6, 1e9))))

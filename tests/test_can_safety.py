@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from moose.canbus.safety import Command, CommandGuard, GuardParams, GuardState
 from moose.params import VEHICLE_LIMITS, ParamError, VehicleParams
+from moose.schema import MinimumRiskParams
 
 from can_hostile import clock_step, hostile_guard_params, wild
 
@@ -46,10 +47,12 @@ def test_limits_are_the_vehicles_hard_limits_and_configuration_can_only_tighten_
             GuardParams(**{field: value})
     with pytest.raises(ParamError, match="timeout = 0.5 is invalid"):
         GuardParams(timeout=0.5)  # longer than the vehicle ECUs' own 50 ms would keep a dead controller's command alive
-    for field, value in (("timeout", 0.0), ("brake_gain", float("inf")), ("delta_max", float("nan")), ("stop_time", -1.0),
-                         ("brake_fraction", 1.5), ("eps_gain", True)):
+    for field, value in (("timeout", 0.0), ("delta_max", float("nan"))):
         with pytest.raises(ParamError, match=rf"{field} = "):
             GuardParams(**{field: value})
+    for field, value in (("brake_gain", float("inf")), ("stop_time", -1.0), ("brake_fraction", 1.5), ("eps_gain", True)):
+        with pytest.raises(ParamError, match=rf"{field} = "):  # the maneuver's own group (moose.minimum_risk)
+            MinimumRiskParams(**{field: value})
     with pytest.raises(ParamError, match="timeout = 0.01 is invalid: expected at least one command period"):
         CommandGuard(GuardParams(timeout=0.01), period=0.02)
 
@@ -263,7 +266,7 @@ def test_lost_commands_steer_back_to_straight_and_brake_to_a_stop() -> None:
     assert maneuver[-1].steering_angle == pytest.approx(0.0, abs=1e-12) and abs(maneuver[-1].steering_rate) < 0.05
     stopped = states.index(GuardState.STOPPED)
     assert 2.4 < stopped * DT < 3.5  # 23 rad/s at T_brake (about 2.4 s), the slowing under k_ω, 0.2 s still
-    assert abs(omega) < P.stop_speed and outs[stopped + 2][1].torque_rl == 0.0  # released, ramped to 0 at Ṫ_max
+    assert abs(omega) < P.maneuver.stop_speed and outs[stopped + 2][1].torque_rl == 0.0  # released, ramped to 0 at Ṫ_max
     assert all(s == GuardState.STOPPED for s in states[stopped:])
 
 
@@ -273,7 +276,7 @@ def test_braking_falls_with_the_wheel_speed_and_needs_a_fresh_measurement() -> N
     for k in range(30):
         guard.observe_wheel_speeds(0.5, 0.7)  # 0.6 rad/s: k_ω·ω̄ = 90 N m < T_brake
         out = guard.output(t + k * DT)
-    assert out.torque_rl == pytest.approx(-P.brake_gain * 0.6)
+    assert out.torque_rl == pytest.approx(-P.maneuver.brake_gain * 0.6)
     for k in range(30, 60):  # the wheel speeds stop arriving: no blind braking
         out = guard.output(t + k * DT)
     assert out.torque_rl == 0.0 and guard.state == GuardState.MINIMUM_RISK

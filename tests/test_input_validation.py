@@ -195,7 +195,7 @@ def test_an_inconsistent_obstacle_is_dropped_and_reported_and_the_detector_keeps
                                 5.0), graph.status
         level, message, values = graph.status["obstacle_detector"]
         assert level == 1 and "dropped 1 invalid message" in message
-        assert "ObstacleArray.obstacles[0].x_min = 12.0 is invalid" in values["last invalid"]
+        assert "ObstacleArray.obstacles[0].x_min = 12.0 is invalid" in values["invalid:/perception/obstacles"]
         assert all(not m.active for m in graph.threats)  # the bad zone was never used
         graph.publish(OBSTACLES.name, valid(OBSTACLES.name, time.time()))  # the real obstacle still counts
         for _ in range(20):

@@ -22,6 +22,7 @@ from moose.params import ParamError
 from moose.scenario import load_scenario
 from moose.simulation import simulate
 from moose.config import load_config
+from moose_ros.faults import Fault
 from moose_ros.launch import launch
 from moose_ros.runtime import DdsNode
 
@@ -144,7 +145,8 @@ def test_full_graph_reproduces_the_lockstep_outcome() -> None:
     for node in ("observer", "obstacle_detector", "mpc_planner", "msf_planner", "weight_fbl", "motion_controller",
                  "vehicle_simulator"):
         assert f"[{node}]" in log and f"{node} started" in log
-    assert summary["node_exits"]["vehicle_simulator"] == 0
+    assert summary["node_exits"] == {name: 0 for name in summary["node_exits"]}  # SIGTERM at the end: status 0
+    assert not summary["degraded"] and summary["exit_status"] == 0, summary["incidents"]
     assert summary["odom_samples"] > 500
     assert summary["collided"] is lockstep["collided"] is False
     assert summary["left_field"] is lockstep["left_field"] is False
@@ -156,11 +158,11 @@ def test_killed_planner_is_reported_and_the_graph_keeps_running() -> None:
     scenario = load_scenario("paper_v6_w2.0")
     out = io.StringIO()
     summary = launch(scenario, {"scenario": "paper_v6_w2.0", "duration": 4.0},
-                     kill_after=("mpc_planner", 2.0), out=out)  # killed 1 s after the obstacle appeared
+                     faults=[Fault("mpc_planner", "kill", 2.0)], out=out)  # killed 1 s after the obstacle appeared
     assert summary["node_exits"]["mpc_planner"] == -9
     assert "node mpc_planner exited with status -9" in out.getvalue()
     assert summary["diagnostics"]["weight_fbl"]["level"] == 1
-    assert "mpc_planner late or silent" in summary["diagnostics"]["weight_fbl"]["message"]
+    assert "mpc_planner silent: MSF only" in summary["diagnostics"]["weight_fbl"]["message"]
     assert summary["node_exits"]["vehicle_simulator"] == 0  # the run still finished
     assert not summary["collided"]
 

@@ -74,10 +74,11 @@ class MotionController:
         """Steepest reference ramp (m/s^2) the feed-forward asks for."""
         self.reset()
 
-    def reset(self) -> None:
-        """Forget the integrator and the reference ramp."""
+    def reset(self, torque: float = 0.0) -> None:
+        """Forget the integrator and the reference ramp; ``torque`` is the motors' present torque (N m), from
+        which the next output is rate-limited (another controller, the minimum-risk maneuver, drove them)."""
         self._integral = 0.0
-        self._torque = 0.0
+        self._torque = float(torque)
         self._target: float | None = None
         self._ramp_v = 0.0
         self._slope = 0.0

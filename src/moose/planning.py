@@ -7,7 +7,8 @@ processes and hand their plans to :meth:`PlanningStep.combine`) and ``moose bag 
 node graph reproduces the lockstep loop by construction, not by care.
 
 * Mode: ``combined`` blends the two plans with the weight function (a missing MPC plan — failed,
-  late or silent — blends as weight 0, i.e. the MSF plan); ``mpc`` and ``msf`` apply one planner.
+  late or silent — blends as weight 0, i.e. the MSF plan; a missing MSF plan — a dead or silent MSF
+  planner in the node graph — as weight 1, the MPC plan alone); ``mpc`` and ``msf`` apply one planner.
 * The blended first acceleration goes to the FBL (δ*, v_x*); between planning instants δ* is
   re-evaluated at the motion-control rate on the held acceleration with the newest estimate
   (``simulation.steering_fbl_at_motion_rate``), v_x* is held.
@@ -121,10 +122,11 @@ class PlanningStep:
                 msf: Optional[PlanResult]) -> PlanningRecord:
         """The blend of the mode, the FBL reference and the next initial guess from the plans of one instant.
 
-        ``combined`` needs the MSF plan; without an MPC plan it blends with weight 0.  ``mpc`` and
-        ``msf`` need their own plan.  A missing plan that the mode needs raises ``ValueError``.
+        ``combined`` needs one plan: without an MPC plan it blends with weight 0, without an MSF plan it
+        applies the MPC plan (weight 1: the other planner is dead or silent).  ``mpc`` and ``msf`` need
+        their own plan.  A missing plan that the mode needs raises ``ValueError``.
         """
-        if self.mode == "mpc":
+        if self.mode == "mpc" or (self.mode == "combined" and msf is None and mpc is not None):
             if mpc is None:
                 raise ValueError("mode mpc needs an MPC plan")
             blend = Blend(weight_mpc=1.0, accel=np.array(mpc.accel, dtype=float, copy=True))

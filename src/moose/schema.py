@@ -18,10 +18,17 @@ share are declared once here and derived, never repeated:
 from __future__ import annotations
 
 import dataclasses
+import math
+import numbers
 from typing import Literal
 
 from .params import (ParamError, VehicleParams, check, non_negative, positive, replace,
                      unit_interval)
+
+
+def _positive_finite(value: object) -> bool:
+    """A real number (not a bool) in (0, ∞)."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool) and 0.0 < float(value) < math.inf
 
 
 def _divides(period: float, step: float) -> bool:
@@ -360,6 +367,34 @@ class MotionParams:
 
 
 @dataclasses.dataclass(frozen=True)
+class MinimumRiskParams:
+    """The minimum-risk maneuver (:mod:`moose.minimum_risk`): steer back to straight, brake to a stop.
+
+    One set for every place that runs it: the CAN bridge's guard, the motion controller, the simulator's
+    topic-side vehicle I/O."""
+
+    brake_fraction: float = 1.0
+    """T_brake as a share of T_max (0, 1]: the largest braking torque per rear motor."""
+    brake_gain: float = 150.0
+    """k_ω (N m per rad/s of mean rear wheel speed).  Below T_brake the car slows exponentially with the
+    time constant m r² / (2 k_ω) ≈ 0.28 s (Table I's m and r)."""
+    stop_speed: float = 0.1
+    """|ω̄| (rad/s) at or below which the car counts as stopped (0.03 m/s at r = 0.301 m)."""
+    stop_time: float = 0.2
+    """How long ω̄ must stay within ``stop_speed`` before the braking torque is released (s)."""
+    eps_gain: float = MotionParams().k_delta
+    """K_δ (1/s) of the steering-back loop: the motion controller's FB-EPS gain."""
+    straight_tolerance: float = 0.005
+    """|δ_meas| (rad) within which the steering counts as straight and the EPS rests (rate 0) instead of
+    chasing the angle sensor's noise (0.3°, five times its standard deviation in ``SensorParams``)."""
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            check(f.name, getattr(self, f.name), _positive_finite, "a positive finite number")
+        check("brake_fraction", self.brake_fraction, lambda v: v <= 1.0, "a share of T_max in (0, 1]")
+
+
+@dataclasses.dataclass(frozen=True)
 class ManeuverParams:
     """Grid of the y_max table (its friction is the planning μ, :attr:`Config.mu_planning`).
 
@@ -457,6 +492,7 @@ class Config:
     weight: WeightParams = WeightParams()
     fbl: FblParams = FblParams()
     motion: MotionParams = MotionParams()
+    minimum_risk: MinimumRiskParams = MinimumRiskParams()
     simulation: SimulationParams = SimulationParams()
     verdict: VerdictParams = VerdictParams()
 

@@ -27,20 +27,11 @@ EPS rate 0, the angle reference at the measured angle.  ``commanding`` while the
 valid command is at most ``timeout`` old: the command, limited.  A command with a
 non-finite field is invalid and discards the held command.  When the newest valid command
 is older than ``timeout`` (or was discarded) the guard runs the **minimum-risk maneuver**
-(``minimum_risk``), its targets limited like any command:
-
-* steering back to straight ahead: the angle reference ramps to 0 at δ̇_max, and the EPS
-  rate command is −K_δ · δ_meas (the measured angle, fresh; 0 within ``straight_tolerance``)
-  or the reference's ramp (no fresh measurement), clipped to δ̇_max;
-* braking with the rear motors (regeneration): T = −clip(k_ω · ω̄, ±T_brake) on both
-  wheels, ω̄ the mean measured rear wheel speed.  Both wheels get the same torque (no yaw
-  moment), and the torque falls with the wheel speed, so a rear wheel that starts to lock
-  loses its braking torque instead of staying locked.  Without fresh wheel speeds the
-  target torque is zero (the car coasts: braking blind could reverse it).
-
-Once ω̄ has stayed within ``stop_speed`` for ``stop_time`` the maneuver is complete
-(``stopped``): zero torque, steering centred.  A fresh valid command returns to
-``commanding``, followed from the last output at the rate limits.
+(:mod:`moose.minimum_risk`: steer back to straight ahead, brake with the rear motors; the law the
+motion controller and the simulator's topic I/O run too), its targets limited like any command,
+from the EPS angle and rear wheel speeds the guard last observed (only fresh ones count).  Once
+the maneuver reports the car stopped, the state is ``stopped``: zero torque, steering centred.  A
+fresh valid command returns to ``commanding``, followed from the last output at the rate limits.
 """
 from __future__ import annotations
 
@@ -50,8 +41,9 @@ import math
 import numbers
 from typing import Optional
 
-from moose.motion import MotionParams
+from moose.minimum_risk import ActuatorLimits, Command, MinimumRiskManeuver
 from moose.params import VEHICLE_LIMITS, ParamError, check
+from moose.schema import MinimumRiskParams
 
 from .ecu import ECU_TIMEOUT
 
@@ -86,63 +78,36 @@ class GuardParams:
     timeout: float = ECU_TIMEOUT
     """Age of the newest valid command after which the minimum-risk maneuver starts (s); at most the
     vehicle ECUs' own command timeout, so the bridge never keeps a dead controller's command alive longer."""
-    brake_fraction: float = 1.0
-    """T_brake as a share of ``torque_max`` (0, 1]: the largest braking torque per rear motor."""
-    brake_gain: float = 150.0
-    """k_ω (N m per rad/s of mean rear wheel speed).  Below T_brake the car slows exponentially with the
-    time constant m r² / (2 k_ω) ≈ 0.28 s (Table I's m and r)."""
-    stop_speed: float = 0.1
-    """|ω̄| (rad/s) at or below which the car counts as stopped (0.03 m/s at r = 0.301 m)."""
-    stop_time: float = 0.2
-    """How long ω̄ must stay within ``stop_speed`` before the braking torque is released (s)."""
-    eps_gain: float = MotionParams().k_delta
-    """K_δ (1/s) of the steering-back loop: the motion controller's FB-EPS gain."""
-    straight_tolerance: float = 0.005
-    """|δ_meas| (rad) within which the steering counts as straight and the EPS rests (rate 0) instead of
-    chasing the angle sensor's noise (0.3°, five times its standard deviation in ``SensorParams``)."""
+    maneuver: MinimumRiskParams = MinimumRiskParams()
+    """The minimum-risk maneuver (:mod:`moose.minimum_risk`; the ``minimum_risk`` group of the configuration)."""
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
-            check(f.name, getattr(self, f.name), _positive_finite, "a positive finite number")
+            if f.name != "maneuver":
+                check(f.name, getattr(self, f.name), _positive_finite, "a positive finite number")
+        check("maneuver", self.maneuver, lambda v: isinstance(v, MinimumRiskParams), "a MinimumRiskParams")
         for name, limit_name in HARD_LIMIT.items():
             limit = getattr(VEHICLE_LIMITS, limit_name)
             check(name, getattr(self, name), lambda v, limit=limit: v <= limit,
                   f"at most the vehicle's hard limit {limit_name} = {limit:g} (configuration can only tighten it)")
         check("timeout", self.timeout, lambda v: v <= ECU_TIMEOUT,
               f"at most the vehicle ECUs' command timeout {ECU_TIMEOUT:g} s")
-        check("brake_fraction", self.brake_fraction, lambda v: v <= 1.0, "a share of torque_max in (0, 1]")
+
+    @property
+    def limits(self) -> ActuatorLimits:
+        """The four limits, as every output of the guard respects them."""
+        return ActuatorLimits(self.delta_max, self.steer_rate_limit, self.torque_max, self.torque_rate_limit)
 
     @property
     def brake_torque(self) -> float:
         """T_brake (N m per rear motor)."""
-        return self.brake_fraction * self.torque_max
+        return self.maneuver.brake_fraction * self.torque_max
 
     @classmethod
     def from_vehicle(cls, vehicle: object, **changes: object) -> "GuardParams":
         """The limits of ``vehicle`` (a :class:`~moose.params.VehicleParams`); other fields from ``changes`` or the defaults."""
         limits = {name: getattr(vehicle, limit_name) for name, limit_name in HARD_LIMIT.items()}
         return cls(**limits, **changes)  # type: ignore[arg-type]
-
-
-@dataclasses.dataclass(frozen=True)
-class Command:
-    steering_angle: float
-    """δ* (rad)."""
-    steering_rate: float
-    """EPS motor rate command δ̇_cmd (rad/s)."""
-    torque_rl: float
-    """Rear-left motor torque (N m)."""
-    torque_rr: float
-    """Rear-right motor torque (N m)."""
-
-    @property
-    def valid(self) -> bool:
-        """Every field a finite real number (not a bool, a string, or an integer too large for a float)."""
-        try:
-            return all(isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v)
-                       for v in dataclasses.astuple(self))
-        except (OverflowError, TypeError, ValueError):
-            return False
 
 
 class GuardState(str, enum.Enum):
@@ -194,8 +159,9 @@ class CommandGuard:
         self._cycle = 0
         self._tau = 0.0
         self._t_last: Optional[float] = None
-        self._still = 0
-        """Consecutive outputs with fresh wheel speeds within ``stop_speed``."""
+        self.limits = params.limits
+        self.maneuver = MinimumRiskManeuver(params.maneuver, self.limits, self.period)
+        """The minimum-risk maneuver (:mod:`moose.minimum_risk`), run when commands stop."""
 
     @property
     def timed_out(self) -> bool:
@@ -236,7 +202,7 @@ class CommandGuard:
         old = self._out
         if self._latest is not None and self._fresh(self._command):
             self.state = GuardState.COMMANDING
-            self._still = 0
+            self.maneuver.reset()
             want = self._latest
             out = self._limit(want, old)
             self.clamped = out != want
@@ -248,7 +214,11 @@ class CommandGuard:
                 measured = self._measured_angle()
                 target = Command(old.steering_angle if measured is None else measured, 0.0, 0.0, 0.0)
             else:
-                target = self._minimum_risk(old)
+                wheels = self._wheels
+                target = self.maneuver.target(old, self._measured_angle(),
+                                              wheels[1] if wheels is not None and self._fresh(wheels[0]) else None)
+                if self.maneuver.stopped:
+                    self.state = GuardState.STOPPED
             out = self._limit(target, old)
             self.clamped = False
         self._out = out
@@ -278,44 +248,9 @@ class CommandGuard:
     def _measured_angle(self) -> Optional[float]:
         return self._angle[1] if self._angle is not None and self._fresh(self._angle[0]) else None
 
-    def _minimum_risk(self, old: Command) -> Command:
-        p = self.params
-        angle = old.steering_angle - _clip(old.steering_angle, p.steer_rate_limit * self.period)
-        measured = self._measured_angle()
-        if measured is None:
-            rate = (angle - old.steering_angle) / self.period
-        else:
-            rate = 0.0 if abs(measured) <= p.straight_tolerance else -p.eps_gain * measured
-        torque = 0.0
-        wheels = self._wheels
-        if not (wheels is not None and self._fresh(wheels[0])):
-            self._still = 0
-        elif self.state == GuardState.MINIMUM_RISK:
-            omega = wheels[1]
-            self._still = self._still + 1 if abs(omega) <= p.stop_speed else 0
-            if self._still * self.period >= p.stop_time - _TIME_EPS:
-                self.state = GuardState.STOPPED
-            else:
-                torque = -_clip(p.brake_gain * omega, p.brake_torque)
-        return Command(angle, rate, torque, torque)
-
     def _limit(self, want: Command, old: Command) -> Command:
         """``want`` clipped to the limits, rate-limited from ``old`` over one command period, end stops applied."""
-        p, dt = self.params, self.period
-        angle = old.steering_angle + _clip(_clip(want.steering_angle, p.delta_max) - old.steering_angle,
-                                           p.steer_rate_limit * dt)
-        torques = [o + _clip(_clip(w, p.torque_max) - o, p.torque_rate_limit * dt)
-                   for w, o in ((want.torque_rl, old.torque_rl), (want.torque_rr, old.torque_rr))]
-        rate = self._end_stop(_clip(want.steering_rate, p.steer_rate_limit))
-        return Command(angle, rate, torques[0], torques[1])
-
-    def _end_stop(self, rate: float) -> float:
-        """No EPS rate that would carry the measured angle past ±δ_max within one command period."""
-        delta = self._measured_angle()
-        if delta is None:
-            return rate
-        p = self.params
-        return min(max(rate, -max(p.delta_max + delta, 0.0) / self.period), max(p.delta_max - delta, 0.0) / self.period)
+        return self.limits.limit(want, old, self.period, self._measured_angle())
 
 
 def _finite(value: object) -> bool:

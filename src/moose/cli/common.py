@@ -30,6 +30,10 @@ OUTCOME_EXIT: dict[str, int] = {"clear": EXIT_CLEAR, "collision": EXIT_FAILED, "
                                 "incomplete": EXIT_INCOMPLETE}
 """The exit status of each outcome of :data:`moose.verdict.OUTCOMES` (``moose simulate``, ``moose launch``)."""
 
+EXIT_DEGRADED = 4
+"""``moose launch``: the outcome was ``clear``, but the run was degraded — a node failed to start, died, stalled
+or was stopped by a fault, or the graph fell back (a planner replaced, a minimum-risk maneuver): the car came
+through, the system did not (:mod:`moose_ros.incidents`)."""
 
 class Interrupts:
     """Ctrl-C that cannot be lost.  Python raises KeyboardInterrupt wherever the main thread is; inside a C

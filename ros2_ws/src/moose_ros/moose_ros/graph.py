@@ -18,11 +18,6 @@ from .runtime.qos import (
     QOS_CLOCK, QOS_CLOCK_READER, QOS_DEFAULT, QOS_LATCHED, QOS_LATCHED_READER, QOS_SENSOR, Qos,
 )
 
-COMMAND_TIMEOUT = 0.05
-"""Actuator commands older than this (s) are stale: five 10 ms command cycles, the vehicle ECU's timeout.
-The one value of the command guard of the CAN bridge, the vehicle-ECU emulator and the simulator's
-topic input (which stands in for the same ECUs)."""
-
 STAMP_TOLERANCE = 0.5
 """How far (s) a received message's stamp may lie ahead of the receiver's clock before it is dropped as invalid
 (:func:`moose_ros.convert.checked_time`).  Within one graph every stamp comes from one clock (simulated time, or
@@ -45,6 +40,9 @@ class Node:
     only what its job needs)."""
     job: str
     """What it does, in one line."""
+    redundant: bool = False
+    """One of two nodes that can do the job (the planners): its failure degrades the graph (``weight_fbl``
+    applies the other planner's plan) instead of stopping the car."""
 
 
 NODES: dict[str, Node] = {n.name: n for n in (
@@ -52,8 +50,10 @@ NODES: dict[str, Node] = {n.name: n for n in (
          "plant, sensors and the scenario's obstacle; owns simulated time (/clock)"),
     Node("observer", "perception", "observer:Observer", "state observer: vehicle sensors → state estimate"),
     Node("obstacle_detector", "perception", "detector:Detector", "state + danger zones → threat (τ, w, ν)"),
-    Node("mpc_planner", "planning", "planner:MpcPlannerNode", "MPC planner at the planning rate and on a new obstacle"),
-    Node("msf_planner", "planning", "planner:MsfPlannerNode", "MSF planner at the planning rate and on a new obstacle"),
+    Node("mpc_planner", "planning", "planner:MpcPlannerNode", "MPC planner at the planning rate and on a new obstacle",
+         redundant=True),
+    Node("msf_planner", "planning", "planner:MsfPlannerNode", "MSF planner at the planning rate and on a new obstacle",
+         redundant=True),
     Node("weight_fbl", "planning", "weight_fbl:WeightFbl", "weight function and FBL: blend → references"),
     Node("motion_controller", "control", "motion:Motion", "PI speed control, TDL, feedback EPS → actuator command"),
     Node("can_bridge", "bridge", "can_bridge:CanBridge", "actuator command ↔ guarded CAN frames ↔ sensor topics"),
@@ -117,6 +117,19 @@ class Topic:
     """What it carries beyond the type name (frames, units), for the topic table."""
     reader_qos: Optional[Qos] = None
     """What its subscribers request, when that differs from :attr:`qos`."""
+    tolerance: int = 10
+    """Designed periods a subscriber waits for the next sample before the input is stale (:attr:`deadline`).
+    Ten by default: 0.1 s at 100 Hz, twice the worst lag measured under CPU load (56 ms, eight busy loops on
+    two cores), so that load is counted as deadline misses instead of stopping the car, while a dead
+    publisher is noticed within 0.7 m at the paper's speeds.  Five for the actuator commands: the vehicle
+    ECU's 50 ms timeout, a fact of the car."""
+
+    @property
+    def deadline(self) -> Optional[float]:
+        """How long after its last sample (s, on the subscriber's clock) this input is stale: ``tolerance``
+        designed periods; ``None`` for a topic published on events only.  Every node supervises its inputs
+        with these (``moose_ros.nodes.base.InputWatch``), so the deadlines live here, next to the rates."""
+        return None if self.rate_hz is None else self.tolerance / self.rate_hz
 
     @property
     def subscription_qos(self) -> Qos:
@@ -157,9 +170,9 @@ ODOM = Topic("/vehicle/odom", "nav_msgs/msg/Odometry", QOS_SENSOR_PUBLISHER, "10
 IMU = Topic("/vehicle/imu", "sensor_msgs/msg/Imu", QOS_SENSOR_PUBLISHER, "100 Hz", 100.0, SENSOR_SOURCES, ("observer",),
             "frame imu; a_x, a_y, γ", reader_qos=QOS_SENSOR)
 GPS = Topic("/vehicle/gps", "nav_msgs/msg/Odometry", QOS_SENSOR_PUBLISHER, "1 Hz", 1.0, SENSOR_SOURCES, ("observer",),
-            "odom → gps fix, stamped at measurement, sent 0.2 s later; read reliably (one fix a second)")
+            "odom → gps fix, stamped at measurement, sent 0.2 s later; read reliably (one fix a second)", tolerance=3)
 WHEEL_SPEEDS = Topic("/vehicle/wheel_speeds", "moose_msgs/msg/WheelSpeeds", QOS_SENSOR_PUBLISHER, "100 Hz", 100.0,
-                     SENSOR_SOURCES, ("observer",), "rear wheel speeds", reader_qos=QOS_SENSOR)
+                     SENSOR_SOURCES, ("observer", "motion_controller"), "rear wheel speeds", reader_qos=QOS_SENSOR)
 STEERING = Topic("/vehicle/steering", "moose_msgs/msg/SteeringReport", QOS_SENSOR_PUBLISHER, "100 Hz", 100.0,
                  SENSOR_SOURCES, ("observer", "motion_controller"), "EPS steering angle", reader_qos=QOS_SENSOR)
 OBSTACLES = Topic("/perception/obstacles", "moose_msgs/msg/ObstacleArray", QOS_LATCHED, "on appearance", None,
@@ -170,19 +183,21 @@ STATE = Topic("/perception/state", "moose_msgs/msg/StateEstimate", QOS_DEFAULT, 
 THREAT = Topic("/perception/threat", "moose_msgs/msg/Threat", QOS_DEFAULT, "100 Hz", 100.0, ("obstacle_detector",),
                ("mpc_planner", "msf_planner", "weight_fbl"), "τ, w, ν, side")
 PLAN_MPC = Topic("/planning/mpc", "moose_msgs/msg/PlannerOutput", QOS_DEFAULT, "5 Hz + on a new obstacle", 5.0,
-                 ("mpc_planner",), ("weight_fbl",), "planned accelerations, status")
+                 ("mpc_planner",), ("weight_fbl",), "planned accelerations, status", tolerance=2)
 PLAN_MSF = Topic("/planning/msf", "moose_msgs/msg/PlannerOutput", QOS_DEFAULT, "5 Hz + on a new obstacle", 5.0,
-                 ("msf_planner",), ("weight_fbl",), "planned accelerations, status")
+                 ("msf_planner",), ("weight_fbl",), "planned accelerations, status", tolerance=2)
 BLEND = Topic("/planning/blend", "moose_msgs/msg/Blend", QOS_DEFAULT, "5 Hz", 5.0, ("weight_fbl",),
-              ("mpc_planner",), "w_MPC, the blended plan (the MPC's next initial guess), δ*, δ_MPC")
+              ("mpc_planner",), "w_MPC, the blended plan (the MPC's next initial guess), δ*, δ_MPC", tolerance=2)
 REFERENCE = Topic("/control/reference", "moose_msgs/msg/Reference", QOS_DEFAULT,
                   "100 Hz (δ* re-evaluated per estimate)", 100.0, ("weight_fbl",), ("motion_controller",), "δ*, v_x*")
 ACTUATOR_COMMAND = Topic("/control/actuator_command", "moose_msgs/msg/ActuatorCommand", QOS_DEFAULT,
                          "100 Hz (per estimate)", 100.0, ("motion_controller",), ("vehicle_simulator", "can_bridge"),
-                         "δ*, δ̇_cmd, T_rl, T_rr")
-DIAGNOSTICS = Topic("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", QOS_LATCHED, "1 Hz + on start", 1.0, _ALL,
-                    ("vehicle_simulator",), "each node's status; the simulator starts the clock when all reported",
-                    reader_qos=QOS_LATCHED_READER)
+                         "δ*, δ̇_cmd, T_rl, T_rr", tolerance=5)
+DIAGNOSTICS = Topic("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", QOS_LATCHED, "1 Hz + on start and change",
+                    1.0, _ALL, ("vehicle_simulator", "motion_controller"),
+                    "each node's status; the simulator starts the clock when all reported; the motion controller "
+                    "stops the car when a node it needs reports an error or falls silent",
+                    reader_qos=QOS_LATCHED_READER, tolerance=3)
 
 TF = Topic("/tf", "tf2_msgs/msg/TFMessage", QOS_TF, "100 Hz per publisher", 100.0, ("vehicle_simulator", "observer"),
            (), "odom → base_link (observer, estimate), odom → base_link_truth (simulator, ground truth)")
@@ -190,6 +205,11 @@ TF_STATIC = Topic("/tf_static", "tf2_msgs/msg/TFMessage", QOS_LATCHED, "once at 
                   "base_link → imu, gps (sensor mounts)", reader_qos=QOS_LATCHED_READER)
 MARKERS = Topic("/planning/markers", "visualization_msgs/msg/MarkerArray", QOS_DEFAULT, "5 Hz (per blend)", 5.0,
                 ("weight_fbl",), (), "in odom: danger zone, its width w, MPC, MSF and blended predicted paths")
+
+COMMAND_TIMEOUT = ACTUATOR_COMMAND.deadline
+"""Actuator commands older than this (s) are stale: five 10 ms command cycles, the vehicle ECU's timeout.
+The one value of the command guard of the CAN bridge, the vehicle-ECU emulator and the simulator's
+topic input (which stands in for the same ECUs)."""
 
 TOPICS: dict[str, Topic] = {t.name: t for t in (
     CLOCK, ODOM, IMU, GPS, WHEEL_SPEEDS, STEERING, OBSTACLES, STATE, THREAT, PLAN_MPC, PLAN_MSF, BLEND, REFERENCE,
@@ -199,6 +219,42 @@ TOPICS: dict[str, Topic] = {t.name: t for t in (
 
 PLANS: dict[str, Topic] = {"mpc": PLAN_MPC, "msf": PLAN_MSF}
 """The output topic of each planner."""
+
+# -- supervision (moose_ros.nodes.base) -------------------------------------------------------------
+SUPERVISION_PERIOD = 1.0 / ACTUATOR_COMMAND.rate_hz
+"""How often every node checks its inputs' deadlines and its own executor (s, on its clock): the command cycle."""
+STARTUP_GRACE = 1.0
+"""An input never received is stale this long after the node's clock started (s): the graph's first plan and
+reference arrive within 0.3 s; the obstacle appears after the scenario's lead time (1 s)."""
+CYCLE_DEADLINE = COMMAND_TIMEOUT
+"""A node whose executor runs no cycle for longer than this (s) missed a deadline: its 100 Hz inputs went
+stale meanwhile (the vehicle ECU's command timeout)."""
+STALL_TIME = 0.25
+"""A node whose executor runs no cycle for longer than this (s) stalled (SIGSTOP, a hung callback, a starved CPU):
+five times the tightest deadline, and longer than any planning solve that still meets its 0.2 s slot."""
+CONTROL_LAG_MAX = 2.0 / ACTUATOR_COMMAND.rate_hz
+"""The motion controller missed a deadline when it commands on an estimate older than this (s, on its clock):
+two command cycles; the lockstep loop commands on the estimate of the same cycle."""
+
+
+def essential_upstream(node: str) -> tuple[str, ...]:
+    """The nodes whose output ``node`` needs and cannot do without: the publishers of its inputs and, walking
+    upstream, of theirs — but not through a :attr:`Node.redundant` node (a planner), whose failure the graph
+    absorbs (``weight_fbl`` applies the other plan).  ``/clock`` and ``/diagnostics`` are not data inputs.
+    The motion controller stops the car when one of these reports an error or falls silent on /diagnostics."""
+    found: list[str] = []
+    todo = [node]
+    while todo:
+        current = todo.pop()
+        for topic in subscribes(current):
+            if topic is CLOCK or topic is DIAGNOSTICS:
+                continue
+            for publisher in topic.publishers:
+                if publisher == node or publisher in found or NODES[publisher].redundant:
+                    continue
+                found.append(publisher)
+                todo.append(publisher)
+    return tuple(n for n in NODES if n in found)
 
 
 def publishes(node: str) -> list[Topic]:
@@ -218,11 +274,12 @@ def topic_table() -> str:
         parts = ["reliable" if q.reliable else "best effort"] + (["transient local"] if q.transient_local else [])
         return ", ".join(parts + [f"keep last {q.depth}"])
 
-    rows = ["| topic | type | content | publishers → subscribers | rate | QoS (publishers; subscribers if other) |",
-            "|---|---|---|---|---|---|"]
+    rows = ["| topic | type | content | publishers → subscribers | rate | deadline | QoS (publishers; subscribers if "
+            "other) |", "|---|---|---|---|---|---|---|"]
     for t in TOPICS.values():
         subscribers = ", ".join(t.subscribers) or "tools (monitor, recorder)"
         reader = f"; {qos(t.reader_qos)}" if t.reader_qos else ""
+        deadline = "—" if t.deadline is None else f"{t.deadline:g} s"
         rows.append(f"| `{t.name}` | {t.type} | {t.content} | {', '.join(t.publishers)} → {subscribers} | {t.rate} "
-                    f"| {qos(t.qos)}{reader} |")
+                    f"| {deadline} | {qos(t.qos)}{reader} |")
     return "\n".join(rows)

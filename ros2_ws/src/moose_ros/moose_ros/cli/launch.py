@@ -1,4 +1,10 @@
-"""``moose launch [GRAPH]``: run the whole node graph as separate processes, summarised like ``moose simulate``."""
+"""``moose launch [GRAPH]``: run the whole node graph as separate processes, summarised like ``moose simulate``.
+
+Exit status: 0 ``clear``; 1 a failure outcome (``collision``, ``left_field``, ``lost_control``,
+``stopped_short``); 2 bad input (nothing started); 3 ``incomplete`` (too little odometry, or the run was cut
+short: SIGTERM, a node that failed to start, the simulator gone); 4 ``clear`` but degraded (a node failed,
+stalled or was faulted, a fallback or a minimum-risk maneuver ran); 130 Ctrl-C.
+"""
 from __future__ import annotations
 
 import argparse
@@ -29,6 +35,9 @@ def add_subparser(subparsers: Any) -> None:
                         help="what the nodes run on: rclpy (ROS 2; the interpreter of .venv-ros when this one has no "
                              "rclpy) or dds (Cyclone DDS); default: MOOSE_RUNTIME, else rclpy when importable here")
     launch.add_argument("--rate", type=positive_float, default=1.0, help="simulated seconds per wall-clock second")
+    launch.add_argument("--fault", action="append", default=[], metavar="NODE:kill@T|NODE:stall@T:D",
+                        help="inject a fault: SIGKILL NODE at simulated time T, or SIGSTOP it at T for D simulated "
+                             "seconds (repeatable)")
     launch.add_argument("--json", help="write the summary as JSON to this path")
     launch.add_argument("--bag", help="record every topic into this bag directory (default: a new folder under runs/)")
     launch.add_argument("--no-bag", action="store_true", help="do not record a bag")
@@ -41,6 +50,7 @@ def add_subparser(subparsers: Any) -> None:
 
 def cmd_launch(args: argparse.Namespace) -> int:
     from ..bag import BagError
+    from ..faults import Fault
     from ..launch import launch, planner_mode
     from ..parameters import ScenarioParams
 
@@ -53,19 +63,44 @@ def cmd_launch(args: argparse.Namespace) -> int:
         params["planning.mu_estimate"] = args.mu_estimate
     planner = planner_mode(args.planner, args.config)
     json_path = check_output_file("--json", args.json)  # before the run: nothing is lost at its end
+    faults = [Fault.parse(text) for text in args.fault]
     bag = None if args.no_bag else (check_output_dir("--bag", args.bag) if args.bag is not None
                                     else run_folder(scenario.name, planner) / "bag")
     try:
         summary = launch(scenario, params, graph=args.graph, planner=planner, seed=args.seed, params_file=args.config,
-                         rate=args.rate, bag=bag, runtime=args.runtime,
+                         rate=args.rate, bag=bag, faults=faults, runtime=args.runtime,
                          foxglove=(args.foxglove_host, args.foxglove) if args.foxglove is not None else None)
     except BagError as exc:
         raise ParamError(str(exc)) from None
-    print(format_summary(summary))
-    print(f"node exits      {summary['node_exits']}")
+    print(format_launch_summary(summary))
     print(f"runtime         {', '.join(f'{name} {rt}' for name, rt in summary['runtime'].items())}")
     if bag is not None:
         print(f"bag             {bag}")
     if json_path is not None:
         json_path.write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n", encoding="utf-8")
-    return 0
+    return int(summary["exit_status"])
+
+
+def format_launch_summary(summary: dict[str, Any]) -> str:
+    """The summary of ``moose simulate`` (without odometry: the verdict alone), and what only the
+    graph has: each node's end, the incidents, the real-time factor and the exit status."""
+    if summary["odom_samples"]:
+        lines = [format_summary(summary)]  # the verdict first, as moose simulate prints it
+    else:
+        lines = [f"outcome         {summary['outcome'].upper()}: {summary['reason']}",
+                 "odometry        none: nothing to judge (incomplete)"]
+    lines.append("nodes           " + ", ".join(f"{name} {end} ({summary['node_exits'].get(name)})"
+                                                for name, end in summary["node_status"].items()))
+    rtf = summary["real_time_factor"]
+    achieved = "n/a" if rtf["achieved"] is None else f"{rtf['achieved']:.2f}"
+    lines.append(f"real time       --rate {rtf['requested']:g}, achieved {achieved}")
+    misses = {n: c for n, c in summary["deadline_misses"].items() if c}
+    lines.append(f"deadline misses {misses or 'none'}")
+    lines.append(f"incidents       {len(summary['incidents'])}"
+                 + (" (degraded)" if summary["degraded"] else ""))
+    for incident in summary["incidents"]:
+        t = "     " if incident["t"] is None else f"{incident['t']:5.2f}"
+        more = f" (+{incident['repeats']} more)" if incident["repeats"] else ""
+        lines.append(f"  {t} s  {incident['node']:<18} {incident['kind']:<16} {incident['message']}{more}")
+    lines.append(f"exit status     {summary['exit_status']}")
+    return "\n".join(lines)

@@ -13,12 +13,16 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
+import signal
 import sys
+import threading
 from typing import Any, Callable, Sequence
 
 from moose.params import ParamError
 
 from ..graph import NODES
+from ..process import watch_parent
 
 
 def node_class(name: str) -> Callable[[Any], Any]:
@@ -61,6 +65,20 @@ def run(name: str, argv: Sequence[str] = ()) -> int:
     if args.params:
         check_parameter_file(args.params)
     rt = create_node(name, args.params, parse_overrides(args.param))
+    node = None
+
+    def terminate(*_: Any) -> None:  # SIGTERM: the end of a run, or the launcher is gone — a normal end, status 0
+        if node is None:
+            raise SystemExit(0)
+        node.message = "stopped"
+        try:
+            node.publish_diagnostics()  # the final counters reach the launcher
+        except Exception:  # noqa: BLE001 - the node is going anyway
+            pass
+        rt.shutdown()
+
+    signal.signal(signal.SIGTERM, terminate)
+    watch_parent(_parent_gone)
     node = cls(rt)
     node.publish_diagnostics()  # announce: the simulator starts the clock when every node has
     rt.log_info(f"{name} started (DDS discovery {rt.discovery.describe()})")
@@ -73,6 +91,20 @@ def run(name: str, argv: Sequence[str] = ()) -> int:
         node.close()
         rt.shutdown()
     return 0
+
+
+PARENT_GRACE = 3.0
+"""Seconds a node whose launcher is gone has to shut down before it exits hard."""
+
+
+def _parent_gone() -> None:
+    """The process that started this node is gone (:func:`moose_ros.process.watch_parent`): stop as on SIGTERM,
+    and exit hard if that does not end the process within :data:`PARENT_GRACE`."""
+    print("the process that started this node is gone: shutting down", file=sys.stderr, flush=True)
+    timer = threading.Timer(PARENT_GRACE, os._exit, (1,))
+    timer.daemon = True
+    timer.start()
+    os.kill(os.getpid(), signal.SIGTERM)
 
 
 def main(name: str, argv: Sequence[str]) -> None:

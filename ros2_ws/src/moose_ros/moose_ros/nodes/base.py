@@ -1,23 +1,92 @@
-"""What every node shares: the runtime node, its typed parameters, validated subscriptions and the 1 Hz
-diagnostics heartbeat."""
+"""What every node shares: the runtime node, its typed parameters, supervised inputs and the diagnostics heartbeat.
+
+**Supervision.**  Every node watches the freshness of its inputs (:class:`InputWatch`): an input whose last
+sample arrived longer ago than its topic's deadline (:attr:`moose_ros.graph.Topic.deadline`, derived from the
+designed rate) is *stale*; an input never received is stale :data:`~moose_ros.graph.STARTUP_GRACE` after the
+node's clock started.  The node's :meth:`GraphNode.supervise` runs every
+:data:`~moose_ros.graph.SUPERVISION_PERIOD` on the node's clock (simulated time with ``use_sim_time``, else
+the monotonic clock), hands the stale set to :meth:`GraphNode.on_inputs` (each node decides what a stale
+input means for its job) and measures the node's own executor: a gap between two supervision cycles longer
+than :data:`~moose_ros.graph.CYCLE_DEADLINE` is a deadline miss, longer than
+:data:`~moose_ros.graph.STALL_TIME` a stall (SIGSTOP, a hung callback, a starved CPU), both counted.
+
+**Validation.**  :meth:`GraphNode.subscribe` is the only way a node subscribes: each message is converted to
+its core record by :data:`moose_ros.convert.RECORDS`, which validates it.  An invalid message never reaches the
+node's code and never raises, and does not count as an arrival for supervision: it is dropped, counted per
+topic (``invalid TOPIC`` in the status values), and an ``invalid:TOPIC`` WARN problem (logged when it
+starts) stands while such messages arrived within the last :data:`INVALID_HOLD`.
+
+**Diagnostics.**  The status on /diagnostics is the node's own (``level``, ``message``, ``values``, set by
+its job) combined with its current *problems* (:meth:`GraphNode.problem`): the highest level wins, the
+messages are joined, and ``values`` carries ``problems`` (the problem keys, e.g. ``stale:/perception/state``,
+``minimum_risk``), each problem's text under its key, ``deadline_misses``, ``stalls`` and ``longest_gap_ms``.  It is published once a second
+and at once whenever its level changes, so a node that reacts to another's health (the motion controller)
+hears of an error within one supervision cycle.  Levels: OK; WARN — degraded, the node still does its job
+(a planner fell back, a slow cycle); ERROR — the node cannot do its job, and who depends on it must not
+rely on its output.
+"""
 from __future__ import annotations
 
 import time
 from collections import Counter
-from typing import Any, Callable
+from typing import Any, Callable, Iterable, Optional
 
 from .. import convert as cv
-from ..graph import DIAGNOSTICS, TF_STATIC, Topic
+from ..graph import (CLOCK, CYCLE_DEADLINE, DIAGNOSTICS, STALL_TIME, STARTUP_GRACE, SUPERVISION_PERIOD, TF_STATIC, Topic,
+                     subscribes)
 from ..parameters import node_parameters
 
 OK, WARN, ERROR = 0, 1, 2
 """diagnostic_msgs/DiagnosticStatus levels."""
+INVALID_HOLD = 1.0
+"""How long (s) the ``invalid:TOPIC`` problem stands after the last invalid message on TOPIC."""
+
+
+class InputWatch:
+    """When each input last arrived (on the node's clock) and which inputs are past their deadline."""
+
+    def __init__(self, topics: Iterable[Topic], grace: float = STARTUP_GRACE) -> None:
+        self.deadlines = {t.name: t.deadline for t in topics if t.deadline is not None}
+        """Topic name → deadline (s)."""
+        self.grace = grace
+        self.last: dict[str, float] = {}
+        self.start: Optional[float] = None
+        """When supervision started (the node's first supervision cycle)."""
+
+    def seen(self, name: str, now: float) -> None:
+        """A sample of ``name`` arrived at ``now``."""
+        self.last[name] = now
+
+    def age(self, name: str, now: float) -> Optional[float]:
+        """Time since the last sample of ``name`` (s); ``None`` if none arrived yet."""
+        last = self.last.get(name)
+        return None if last is None else now - last
+
+    def stale(self, now: float, names: Optional[Iterable[str]] = None) -> dict[str, Optional[float]]:
+        """The stale inputs among ``names`` (default: all supervised) → their age (``None``: never received,
+        and the startup grace is over)."""
+        if self.start is None:
+            self.start = now
+        out: dict[str, Optional[float]] = {}
+        for name in self.deadlines if names is None else names:
+            age = self.age(name, now)
+            if age is None:
+                if now - self.start > self.grace:
+                    out[name] = None
+            elif age > self.deadlines[name] + 1e-9:
+                out[name] = age
+        return out
+
+
+def describe_stale(name: str, age: Optional[float], deadline: float) -> str:
+    """``/perception/state stale (0.12 s > 0.05 s)`` or ``/perception/state never received``."""
+    return f"{name} never received" if age is None else f"{name} stale ({age:.2f} s > {deadline:g} s)"
 
 
 class GraphNode:
     """Runtime node ``rt``, the core's configuration and the node's own parameters (both validated:
-    :func:`moose_ros.parameters.node_parameters`), validated subscriptions (:meth:`subscribe`) and a 1 Hz
-    diagnostics heartbeat."""
+    :func:`moose_ros.parameters.node_parameters`), supervised inputs and the diagnostics heartbeat (see the
+    module docstring)."""
 
     name = "node"
 
@@ -29,22 +98,37 @@ class GraphNode:
         # transient local: a late joiner (the simulator waiting for the graph) sees each node's last status
         self._diag = DIAGNOSTICS.publisher(rt)
         self.level, self.message, self.values = OK, "running", {}
+        self.problems: dict[str, tuple[int, str]] = {}
+        """Current problems: key → (level, text); see :meth:`problem`."""
+        # /clock is the runtime's (with simulated time, a silent clock stops every deadline with it); /diagnostics
+        # is health, not data (the motion controller supervises it itself)
+        self.inputs = InputWatch(t for t in subscribes(self.name) if t not in (CLOCK, DIAGNOSTICS))
+        self.deadline_misses = 0
+        """Executor cycles later than CYCLE_DEADLINE, plus what the node counts itself (a planning slot over
+        budget, a late control cycle)."""
+        self.stalls = 0
+        self.longest_gap = 0.0
+        self._last_cycle: Optional[float] = None
+        self._deferred = False
+        self._published_level: Optional[int] = None
+        self._published_stalls = 0
         self.invalid: Counter[str] = Counter()
         """Invalid messages dropped, by topic."""
-        self._invalid_reason = ""
-        self._invalid_new = 0
-        self._invalid_logged: dict[str, float] = {}
+        self._invalid_last: dict[str, tuple[float, str]] = {}
+        """Topic → (clock of the last invalid message, its reason)."""
         rt.timer(1.0, self.publish_diagnostics)
+        rt.timer(SUPERVISION_PERIOD, self.supervise)
 
-    def close(self) -> None:
-        """Release what the node holds beyond its runtime entities (a bus, a thread); called once at shutdown."""
+    def clock(self) -> float:
+        """The node's clock for deadlines (s): simulated time with ``use_sim_time``, else the monotonic clock
+        (immune to wall-clock steps)."""
+        return self.rt.now() if getattr(self.rt, "use_sim_time", False) else time.monotonic()
 
     def subscribe(self, topic: Topic, handler: Callable[[Any], None]) -> Any:
-        """Subscribe to ``topic``; ``handler`` gets the validated record (:data:`moose_ros.convert.RECORDS`).
-
-        An invalid message never reaches ``handler`` and never raises: it is dropped, counted per topic
-        (:attr:`invalid`), logged (at most once a second per topic) and reported on /diagnostics."""
-        convert = cv.RECORDS[topic.name]
+        """Subscribe to ``topic`` with its subscribers' QoS; ``handler`` gets the validated record
+        (:data:`moose_ros.convert.RECORDS`), and each valid arrival is noted for :attr:`inputs`.  An invalid
+        message never reaches ``handler`` and never raises (see the module docstring)."""
+        name, convert = topic.name, cv.RECORDS[topic.name]
 
         def on_message(msg: Any) -> None:
             now = self.rt.now()
@@ -52,33 +136,107 @@ class GraphNode:
             try:
                 record = convert(msg, now if clock_known else None)
             except cv.InvalidMessage as exc:
-                self.reject(topic.name, str(exc))
+                self.reject(name, str(exc))
                 return
+            self.inputs.seen(name, self.clock())
             handler(record)
 
         return topic.subscription(self.rt, on_message)
 
     def reject(self, topic: str, reason: str) -> None:
-        """Count a dropped message on ``topic`` and say why (log and the next diagnostics)."""
+        """Count a dropped message on ``topic`` and say why: the ``invalid:TOPIC`` problem (logged when it starts)."""
         self.invalid[topic] += 1
-        self._invalid_new += 1
-        self._invalid_reason = f"{topic}: {reason}"
-        last = self._invalid_logged.get(topic)
-        if last is None or time.monotonic() - last >= 1.0:
-            self._invalid_logged[topic] = time.monotonic()
-            self.rt.log_warn(f"dropped an invalid message on {topic} ({self.invalid[topic]} so far): {reason}")
+        now = self.clock()
+        self._invalid_last[topic] = (now, reason)
+        self.problem(f"invalid:{topic}", WARN, f"dropped {self.invalid[topic]} invalid message(s) on {topic}: {reason}")
+
+    # -- supervision ------------------------------------------------------------------------
+
+    def supervise(self) -> None:
+        """One supervision cycle: the node's own executor gap, then the stale inputs to :meth:`on_inputs`."""
+        now = self.clock()
+        gap = 0.0 if self._last_cycle is None else now - self._last_cycle
+        self._last_cycle = now
+        self.longest_gap = max(self.longest_gap, gap)
+        if gap > STALL_TIME:
+            self.stalls += 1
+            self.rt.log_warn(f"no executor cycle for {gap:.2f} s (stalled or starved)")
+        late = gap > CYCLE_DEADLINE
+        if late:
+            self.deadline_misses += 1
+        if late and not self._deferred:
+            # this node was late itself: what waits in its readers has not been taken yet, so its inputs are
+            # judged in the next cycle, after the executor has run their callbacks (once: a node late every
+            # cycle still judges every other one)
+            self._deferred = True
+        else:
+            self._deferred = False
+            self.on_inputs(self.inputs.stale(now), now)
+        for topic, (when, _reason) in list(self._invalid_last.items()):
+            if now - when > INVALID_HOLD:
+                del self._invalid_last[topic]
+                self.problem(f"invalid:{topic}", None)
+        self._publish_on_change()
+
+    def on_inputs(self, stale: dict[str, Optional[float]], now: float) -> None:
+        """React to the stale inputs (name → age, ``None``: never received).  Default: each stale input is a
+        WARN problem; nodes that cannot work without an input raise it to ERROR (and act)."""
+        self.report_stale(stale, WARN)
+
+    def report_stale(self, stale: dict[str, Optional[float]], level: int,
+                     levels: Optional[dict[str, int]] = None, names: Optional[Iterable[str]] = None) -> None:
+        """Set a ``stale:TOPIC`` problem for each stale input among ``names`` (default: all supervised), at
+        ``levels[TOPIC]`` or ``level``; clear the others."""
+        for name in self.inputs.deadlines if names is None else names:
+            key, deadline = f"stale:{name}", self.inputs.deadlines[name]
+            if name in stale:
+                self.problem(key, (levels or {}).get(name, level), describe_stale(name, stale[name], deadline))
+            else:
+                self.problem(key, None)
+
+    def problem(self, key: str, level: Optional[int], text: str = "") -> None:
+        """Set problem ``key`` at ``level`` with ``text``, or clear it (``level=None``)."""
+        if level is None:
+            if self.problems.pop(key, None) is not None:
+                self.rt.log_info(f"recovered: {key}")
+            return
+        previous = self.problems.get(key)
+        self.problems[key] = (level, text)
+        if previous is None or previous[0] != level:
+            (self.rt.log_error if level >= ERROR else self.rt.log_warn)(text)
+
+    def status(self) -> tuple[int, str, dict[str, Any]]:
+        """The combined status: (level, message, values) of the job and the problems."""
+        level = max([self.level, *(lv for lv, _ in self.problems.values())])
+        texts = [text for _lv, text in sorted(self.problems.values(), key=lambda p: -p[0])]
+        message = "; ".join(texts) if texts else self.message
+        if texts and self.message not in ("running",):
+            message = f"{self.message}; {message}"
+        values = dict(self.values)
+        values.update(problems=",".join(sorted(self.problems)), deadline_misses=self.deadline_misses,
+                      stalls=self.stalls, longest_gap_ms=f"{1e3 * self.longest_gap:.0f}")
+        values.update({key: text for key, (_level, text) in self.problems.items()})
+        values.update({f"invalid {topic}": count for topic, count in sorted(self.invalid.items())})
+        return level, message, values
+
+    def _publish_on_change(self) -> None:
+        """Publish now when the level changed or the node noticed a stall of its own."""
+        if self.status()[0] != self._published_level or self.stalls != self._published_stalls:
+            self.publish_diagnostics()
+
+    # -- life cycle -------------------------------------------------------------------------
+
+    def close(self) -> None:
+        """Release what the node holds beyond its runtime entities (a bus, a thread); called once at shutdown."""
+
+    def stamp_time(self) -> float:
+        """The time that stamps this node's diagnostics: the node's ROS time (simulated with ``use_sim_time``)."""
+        return float(self.rt.now())
 
     def publish_diagnostics(self) -> None:
-        """The node's status; WARN while invalid messages are being dropped, with the counts per topic."""
-        level, message, values = self.level, self.message, dict(self.values)
-        if self.invalid:
-            values.update({f"invalid {topic}": count for topic, count in sorted(self.invalid.items())})
-            values["last invalid"] = self._invalid_reason
-            if self._invalid_new:
-                level = max(level, WARN)
-                message = f"{message}; dropped {self._invalid_new} invalid message(s)"
-            self._invalid_new = 0
-        self._diag(cv.diagnostic_to_msg(self.rt, self.rt.now(), self.name, level, message, values))
+        level, message, values = self.status()
+        self._published_level, self._published_stalls = level, self.stalls
+        self._diag(cv.diagnostic_to_msg(self.rt, self.stamp_time(), self.name, level, message, values))
 
     def table(self) -> Any:
         """The maximum steering table of the vehicle the stack believes in (the planning μ; detector, MSF planner)."""

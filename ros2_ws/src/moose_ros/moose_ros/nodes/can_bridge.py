@@ -10,7 +10,7 @@ node's clock and the command frames go out from the node's 10 ms timer instead o
 from __future__ import annotations
 
 import time
-from typing import Any
+from typing import Any, Optional
 
 from moose.canbus.bus import BusParams
 from moose.canbus.runner import BridgeParams, BridgeRunner
@@ -34,7 +34,8 @@ class CanBridge(GraphNode):
         p = self.params
         bus = BusParams(**{k: v for k, v in (("interface", p.can_interface), ("channel", p.can_channel),
                                              ("port", p.can_port)) if v is not None})
-        params = BridgeParams(guard=GuardParams.from_vehicle(self.config.vehicle, timeout=p.command_timeout), bus=bus)
+        params = BridgeParams(guard=GuardParams.from_vehicle(self.config.vehicle, timeout=p.command_timeout,
+                                                         maneuver=self.config.minimum_risk), bus=bus)
         self.simulated = bool(getattr(rt, "use_sim_time", False))
         self.runner = BridgeRunner(params, log=p.can_log, clock=rt.now if self.simulated else time.monotonic)
         self.pub = sensor_publishers(rt, rt.now())
@@ -42,6 +43,9 @@ class CanBridge(GraphNode):
         rt.timer(COMMAND_PERIOD, self.tick)
         if not self.simulated:
             self.runner.start()  # the sender thread, real time; this thread runs the callbacks
+
+    def on_inputs(self, stale: dict[str, Optional[float]], now: float) -> None:
+        """The commands are the guard's to supervise: it runs the minimum-risk maneuver and says so."""
 
     def on_command(self, command: ActuatorCommand) -> None:
         c = command

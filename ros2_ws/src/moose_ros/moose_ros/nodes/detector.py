@@ -1,14 +1,14 @@
 """``obstacle_detector``: state + visible danger zones → /perception/threat (τ, w, ν)."""
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Optional
 
 from moose.detector import ObstacleDetector
 from moose.signals import StateEstimate
 
 from .. import convert as cv
 from ..graph import OBSTACLES, STATE, THREAT
-from .base import GraphNode
+from .base import ERROR, GraphNode
 
 
 class Detector(GraphNode):
@@ -23,6 +23,10 @@ class Detector(GraphNode):
         self.pub = THREAT.publisher(rt)
         self.subscribe(OBSTACLES, lambda obstacles: setattr(self, "obstacles", obstacles))
         self.subscribe(STATE, self.on_state)
+
+    def on_inputs(self, stale: dict[str, Optional[float]], now: float) -> None:
+        """Threats follow the estimate (one per state): a stale estimate leaves no threat to publish (ERROR)."""
+        self.report_stale(stale, ERROR)
 
     def on_state(self, estimate: StateEstimate) -> None:
         self.pub(cv.threat_to_msg(self.rt, estimate.t, self.detector.update(estimate.t, estimate, self.obstacles)))

@@ -1,21 +1,38 @@
-"""``motion_controller``: PI speed control, torque distribution law, feedback EPS → actuator command."""
+"""``motion_controller``: PI speed control, torque distribution law, feedback EPS → actuator command; and the
+minimum-risk maneuver when the stack can no longer drive the car."""
 from __future__ import annotations
 
 from typing import Any, Optional
 
+from moose.minimum_risk import ActuatorLimits, Command, MinimumRiskManeuver
 from moose.motion import MotionController
 from moose.signals import Reference, StateEstimate
 
 from .. import convert as cv
-from ..graph import ACTUATOR_COMMAND, REFERENCE, STATE, STEERING
-from .base import GraphNode
+from ..graph import (ACTUATOR_COMMAND, CONTROL_LAG_MAX, DIAGNOSTICS, REFERENCE, STATE, STEERING, WHEEL_SPEEDS,
+                     essential_upstream)
+from .base import ERROR, WARN, GraphNode
+
+NEEDED = (STATE, REFERENCE, STEERING)
+"""Inputs without which the controller cannot drive: the estimate, the reference, the measured steering angle."""
 
 
 class Motion(GraphNode):
     """Motion controller: PI speed control, TDL, feedback EPS → actuator command.
 
-    Runs on every state estimate (100 Hz, the IMU rate) rather than on its own timer, so
-    a command follows its sensor sample by one observer hop, as in the lockstep loop.
+    Runs on every state estimate (100 Hz, the IMU rate) rather than on its own timer, so a command
+    follows its sensor sample by one observer hop, as in the lockstep loop.
+
+    **Minimum-risk maneuver.**  Every supervision cycle (100 Hz on the node's clock) it checks that it can
+    drive: the estimate, the reference and the measured steering angle within their deadlines, and every
+    node it cannot do without (:func:`moose_ros.graph.essential_upstream`: observer, detector, weight_fbl,
+    the sensor source) neither reporting ERROR on /diagnostics nor silent there for longer than the topic's
+    deadline.  If not, it stops following the reference and commands the minimum-risk maneuver
+    (:class:`moose.minimum_risk.MinimumRiskManeuver`, the CAN bridge's law) from its last command, the
+    steering angle and the rear wheel speeds, once per cycle, and reports ERROR with the reasons.  When
+    everything is fresh and healthy again it resumes control (the speed loop restarts from the car's speed).
+    An estimate older than :data:`~moose_ros.graph.CONTROL_LAG_MAX` when it arrives is a deadline miss; one
+    older than its topic's deadline is not acted on.
     """
 
     name = "motion_controller"
@@ -26,15 +43,68 @@ class Motion(GraphNode):
         self.estimate: Optional[StateEstimate] = None
         self.reference: Optional[Reference] = None
         self.delta = 0.0
+        self.omega: Optional[float] = None
+        self.dt = 1.0 / self.config.simulation.motion_rate_hz
+        self.maneuver = MinimumRiskManeuver(self.config.minimum_risk, ActuatorLimits.from_vehicle(self.config.vehicle),
+                                            self.dt)
+        self.last = Command(0.0, 0.0, 0.0, 0.0)
+        """The last command published."""
+        self.reasons: list[str] = []
+        """Why the minimum-risk maneuver runs (empty: the controller drives)."""
+        self.upstream = essential_upstream(self.name)
+        self.health: dict[str, tuple[int, str, float]] = {}
+        """Each essential upstream node's last status on /diagnostics: (level, message, arrival on our clock)."""
+        self.late = 0
         self.pub = ACTUATOR_COMMAND.publisher(rt)
         self.subscribe(STATE, self.on_state)
         self.subscribe(REFERENCE, lambda reference: setattr(self, "reference", reference))
         self.subscribe(STEERING, lambda sample: setattr(self, "delta", sample.delta))
-        self.dt = 1.0 / self.config.simulation.motion_rate_hz
+        self.subscribe(WHEEL_SPEEDS, lambda sample: setattr(self, "omega", 0.5 * (sample.omega_rl + sample.omega_rr)))
+        self.subscribe(DIAGNOSTICS, self.on_diagnostics)
+
+    def on_diagnostics(self, statuses: list[tuple[str, int, str]]) -> None:
+        for name, level, message in statuses:
+            if name in self.upstream:
+                self.health[name] = (level, message, self.clock())
 
     def on_state(self, estimate: StateEstimate) -> None:
         self.estimate = estimate
-        reference = self.reference or Reference(0.0, self.estimate.vx)
-        u = self.controller.step(reference, self.estimate, self.delta, self.dt)
-        self.pub(cv.actuator_to_msg(self.rt, self.estimate.t, reference, u))
+        lag = self.rt.now() - estimate.t
+        if lag > CONTROL_LAG_MAX + 1e-9:
+            self.deadline_misses += 1
+            self.late += 1
+        if self.reasons or lag > STATE.deadline + 1e-9:  # type: ignore[operator]
+            return
+        reference = self.reference or Reference(0.0, estimate.vx)
+        u = self.controller.step(reference, estimate, self.delta, self.dt)
+        self.last = Command(reference.delta, float(u[0]), float(u[1]), float(u[2]))
+        self.pub(cv.actuator_to_msg(self.rt, estimate.t, reference, u))
 
+    def on_inputs(self, stale: dict[str, Optional[float]], now: float) -> None:
+        self.report_stale(stale, ERROR, {WHEEL_SPEEDS.name: WARN})
+        reasons = [f"{t.name} stale" for t in NEEDED if t.name in stale]
+        for node, (level, _message, arrival) in sorted(self.health.items()):
+            if level >= ERROR:
+                reasons.append(f"{node} reports an error")
+            elif now - arrival > DIAGNOSTICS.deadline:  # type: ignore[operator]
+                reasons.append(f"{node} silent on /diagnostics for {now - arrival:.1f} s")
+        self.values = {"late_estimates": self.late}
+        if reasons:
+            if not self.reasons:
+                self.maneuver.reset()
+            self.reasons = reasons
+            self.minimum_risk(now, stale)
+        elif self.reasons:
+            self.reasons = []
+            self.problem("minimum_risk", None)
+            self.controller.reset(torque=self.last.torque_rl)  # the speed loop restarts from the car's speed
+
+    def minimum_risk(self, now: float, stale: dict[str, Optional[float]]) -> None:
+        """One cycle of the minimum-risk maneuver, from the last command and what is still measured fresh."""
+        angle = None if STEERING.name in stale else self.delta
+        omega = None if WHEEL_SPEEDS.name in stale else self.omega
+        self.last = out = self.maneuver.step(self.last, angle, omega)
+        state = "stopped by" if self.maneuver.stopped else "running"
+        self.problem("minimum_risk", ERROR, f"{state} the minimum-risk maneuver: {'; '.join(self.reasons)}")
+        self.pub(cv.actuator_to_msg(self.rt, now, Reference(out.steering_angle, 0.0),
+                                    (out.steering_rate, out.torque_rl, out.torque_rr)))

@@ -2,7 +2,7 @@
 /tf at the IMU rate."""
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Optional
 
 from moose.observer import StateObserver
 from moose.signals import StateEstimate
@@ -10,7 +10,7 @@ from moose.vehicle import initial_state
 
 from .. import convert as cv
 from ..graph import GPS, IMU, STATE, STEERING, TF, WHEEL_SPEEDS
-from .base import WARN, GraphNode
+from .base import ERROR, WARN, GraphNode
 
 
 class Observer(GraphNode):
@@ -30,6 +30,11 @@ class Observer(GraphNode):
         self.subscribe(IMU, lambda sample: self.feed(sample, True))
         for topic in (GPS, WHEEL_SPEEDS, STEERING):
             self.subscribe(topic, self.feed)
+
+    def on_inputs(self, stale: dict[str, Optional[float]], now: float) -> None:
+        """The 100 Hz sensors are needed (without the IMU no estimate is published at all; without the wheel
+        speeds or the steering angle the estimate drifts): ERROR.  A late GPS fix only degrades (WARN)."""
+        self.report_stale(stale, ERROR, {GPS.name: WARN})
 
     def feed(self, sample: Any, publish: bool = False) -> None:
         try:

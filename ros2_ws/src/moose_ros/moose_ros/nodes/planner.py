@@ -12,7 +12,7 @@ from moose.weight import WeightFunction
 
 from .. import convert as cv
 from ..graph import BLEND, PLANS, STATE, THREAT
-from .base import OK, WARN, GraphNode
+from .base import ERROR, OK, WARN, GraphNode
 
 
 class Planner(GraphNode):
@@ -29,6 +29,9 @@ class Planner(GraphNode):
         self.threat: Optional[Threat] = None
         self.detected = False
         self.guess: Optional[np.ndarray] = None
+        self.blocked = False
+        """The estimate or the threat is stale: no plan (the plan topic falls silent, weight_fbl applies the
+        other planner's)."""
         self.pub = PLANS[self.kind].publisher(rt)
         self.subscribe(STATE, lambda estimate: setattr(self, "estimate", estimate))
         self.subscribe(THREAT, self.on_threat)
@@ -36,6 +39,11 @@ class Planner(GraphNode):
         self.next_plan = 0.0
         """Time of the next planning instant: every t_s, restarted by a new obstacle (as the lockstep loop)."""
         rt.timer(1.0 / self.config.simulation.motion_rate_hz, self.on_tick)
+
+    def on_inputs(self, stale: dict[str, Optional[float]], now: float) -> None:
+        """No plan on a stale estimate or threat (ERROR); a stale blend only costs the MPC its warm start (WARN)."""
+        self.report_stale(stale, ERROR, {BLEND.name: WARN})
+        self.blocked = STATE.name in stale or THREAT.name in stale
 
     def make_planner(self) -> Any:
         raise NotImplementedError
@@ -65,11 +73,13 @@ class Planner(GraphNode):
 
     def plan(self, t: Optional[float] = None) -> None:
         """Plan at ``t`` (default: now) from the newest estimate."""
-        if self.estimate is None:
+        if self.estimate is None or self.blocked:
             return
         t = self.rt.now() if t is None else t
         inp = PlannerInput(t, self.estimate, self.threat, self.v_des, self.guess, y_lane=0.0)
         result = self.planner.plan(inp)
+        if result.solve_time_s > self.config.planning.t_s:  # the planning slot is over before the plan exists
+            self.deadline_misses += 1
         self.values = {"status": result.status, "solve_ms": f"{result.solve_time_s * 1e3:.2f}"}
         self.level = OK if result.status in ("converged", "capped", "ok", "idle") else WARN
         self.pub(cv.plan_to_msg(self.rt, t, self.kind, result, self.threat is not None))

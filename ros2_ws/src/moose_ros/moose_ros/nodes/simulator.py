@@ -7,8 +7,10 @@ from typing import Any, Optional
 
 import numpy as np
 
+from moose.canbus.safety import CommandGuard, GuardParams, GuardState
+from moose.minimum_risk import Command
 from moose.sensors import Sensors
-from moose.signals import ActuatorCommand
+from moose.signals import ActuatorCommand, EpsSample, WheelSpeedSample
 from moose.vehicle import VehiclePlant, initial_state
 
 from .. import convert as cv
@@ -17,22 +19,31 @@ from .base import WARN, GraphNode, sensor_publishers
 
 
 class TopicVehicleIo:
-    """The simulator's sensors and actuators as ROS topics."""
+    """The simulator's sensors and actuators as ROS topics.
+
+    The commands reach the plant through the CAN bridge's command guard
+    (:class:`moose.canbus.safety.CommandGuard`: the vehicle's limits, the command timeout and the
+    minimum-risk maneuver), which here stands in for the bridge and the ECUs behind it: a dead or stalled
+    motion controller ends in the same maneuver as in the ``can`` graph, from the EPS angle and wheel
+    speeds the simulator measures.
+    """
 
     def __init__(self, node: "VehicleSimulator") -> None:
         rt = node.rt
         self.node = node
-        self.timeout = node.params.command_timeout
-        self.u = np.zeros(3)
-        self.last_command = -math.inf
+        self.guard = CommandGuard(GuardParams.from_vehicle(node.config.vehicle, timeout=node.params.command_timeout,
+                                                           maneuver=node.config.minimum_risk), period=node.dt)
         self.pub = sensor_publishers(rt, 0.0)  # simulated time starts at 0
         node.subscribe(ACTUATOR_COMMAND, self.on_command)
 
-    def on_command(self, command: ActuatorCommand) -> None:
-        self.u = np.array([command.steering_rate, command.torque_rl, command.torque_rr], dtype=float)
-        self.last_command = self.node.t
+    def on_command(self, c: ActuatorCommand) -> None:
+        self.guard.receive(Command(c.steering_angle, c.steering_rate, c.torque_rl, c.torque_rr))
 
     def send(self, sample: Any, t: float) -> None:
+        if isinstance(sample, EpsSample):
+            self.guard.observe_angle(sample.delta)
+        elif isinstance(sample, WheelSpeedSample):
+            self.guard.observe_wheel_speeds(sample.omega_rl, sample.omega_rr)
         publish, convert = self.pub[type(sample)]
         publish(convert(self.node.rt, sample))
 
@@ -40,11 +51,13 @@ class TopicVehicleIo:
         """Nothing to release: topics go with the node."""
 
     def command(self, t: float) -> np.ndarray:
-        if t - self.last_command <= self.timeout:
-            return self.u
-        if t > 1.0:
-            self.node.level, self.node.message = WARN, "actuator command timeout: zero torque, steering held"
-        return np.zeros(3)
+        out = self.guard.output(t)
+        if self.guard.state in (GuardState.MINIMUM_RISK, GuardState.STOPPED):
+            done = "stopped by" if self.guard.state == GuardState.STOPPED else "running"
+            self.node.problem("commands_lost", WARN, f"actuator commands lost: {done} the minimum-risk maneuver")
+        else:
+            self.node.problem("commands_lost", None)
+        return np.array([out.steering_rate, out.torque_rl, out.torque_rr])
 
 
 class CanVehicleIo:
@@ -53,8 +66,10 @@ class CanVehicleIo:
     def __init__(self, node: "VehicleSimulator") -> None:
         from moose.canbus.ecu import VehicleEcu
 
+        self.node = node
         self.bus = node.params.open_bus(node.name)
         self.ecu = VehicleEcu(timeout=node.params.command_timeout)
+        self.commanded = False
 
     def send(self, sample: Any, t: float) -> None:
         for frame in self.ecu.encode(sample, t):
@@ -66,6 +81,13 @@ class CanVehicleIo:
     def command(self, t: float) -> np.ndarray:
         while (frame := self.bus.recv(timeout=0.0)) is not None:
             self.ecu.on_frame(frame, t)
+        alive = self.ecu.steering_alive(t) and self.ecu.torque_alive(t)
+        self.commanded = self.commanded or alive
+        if self.commanded and not alive:  # no bridge on the bus: the car is the ECUs' own, not the stack's
+            self.node.problem("ecu_timeout", WARN, "vehicle ECUs' command timeout: zero torque, EPS stopped "
+                                                   "(steering held); the stack no longer controls the car")
+        else:
+            self.node.problem("ecu_timeout", None)
         return self.ecu.plant_input(t)
 
 
@@ -102,6 +124,16 @@ class VehicleSimulator(GraphNode):
         self.subscribe(DIAGNOSTICS, self.on_diagnostics)
         # wall-clock pacing: one motion step every dt / rate seconds; simulated time is published on /clock
         rt.timer(self.dt / self.params.rate, self.step)
+
+    def stamp_time(self) -> float:
+        """Simulated time, as every other message of the simulator: it is the graph's clock, not on
+        ``use_sim_time`` itself, and a wall-clock stamp would be refused as far ahead by every node on
+        simulated time (the motion controller then took the simulator for silent and stopped the car)."""
+        return self.t
+
+    def on_inputs(self, stale: dict[str, Optional[float]], now: float) -> None:
+        """The commands are the guard's to supervise (:class:`TopicVehicleIo`); the ECU emulator times them out
+        itself (:class:`moose.canbus.ecu.VehicleEcu`)."""
 
     def on_diagnostics(self, statuses: list[tuple[str, int, str]]) -> None:
         for name, _level, _message in statuses:

@@ -3,6 +3,12 @@ and the markers of the instant (danger zone, predicted paths).
 
 The mode switch, the blend, the FBL reference and the next initial guess are the core's planning
 step (:class:`moose.planning.PlanningStep`), the code the lockstep loop runs.
+
+Supervision: a planner whose plan topic is past its deadline (:attr:`moose_ros.graph.Topic.deadline`, two
+planning periods) is *silent*; in ``combined`` mode the other planner's plan is applied alone (WARN
+``mpc_planner silent: MSF only`` or ``msf_planner silent: MPC only``).  With no live planner of the mode,
+or a stale estimate or threat, the node publishes no reference and reports ERROR: the motion controller
+then runs the minimum-risk maneuver.
 """
 from __future__ import annotations
 
@@ -13,8 +19,11 @@ from moose.planning import PlanningStep, blend_path
 from moose.signals import PlanResult, StateEstimate, Threat
 
 from .. import convert as cv
-from ..graph import BLEND, MARKERS, PLAN_MPC, PLAN_MSF, REFERENCE, STATE, THREAT
-from .base import OK, WARN, GraphNode
+from ..graph import BLEND, MARKERS, PLANS, PLAN_MPC, PLAN_MSF, REFERENCE, STATE, THREAT
+from .base import ERROR, WARN, GraphNode
+
+MODE_PLANNERS = {"combined": ("mpc", "msf"), "mpc": ("mpc",), "msf": ("msf",)}
+"""The planners each mode uses."""
 
 
 class WeightFbl(GraphNode):
@@ -27,6 +36,11 @@ class WeightFbl(GraphNode):
         super().__init__(rt)
         self.step = PlanningStep(self.config, planners=False)
         self.mode = self.step.mode
+        self.planners = MODE_PLANNERS[self.mode]
+        self.live: tuple[str, ...] = self.planners
+        """The mode's planners whose plans are within their deadline."""
+        self.blocked = False
+        """No reference can be made: a stale estimate or threat, or no live planner."""
         self.mpc_timeout = self.params.mpc_timeout
         self.estimate: Optional[StateEstimate] = None
         self.threat: Optional[Threat] = None
@@ -42,6 +56,20 @@ class WeightFbl(GraphNode):
         self.subscribe(PLAN_MPC, lambda plan: self.on_plan("mpc", plan))
         self.subscribe(PLAN_MSF, lambda plan: self.on_plan("msf", plan))
 
+    def on_inputs(self, stale: dict[str, Optional[float]], now: float) -> None:
+        plans = [PLANS[k].name for k in self.planners]
+        self.live = tuple(k for k in self.planners if PLANS[k].name not in stale)
+        silent = [k for k in self.planners if k not in self.live]
+        self.report_stale(stale, ERROR, {name: WARN if self.live else ERROR for name in plans},
+                          names=[STATE.name, THREAT.name, *plans])
+        if silent and self.live:
+            self.problem("fallback", WARN, f"{silent[0]}_planner silent: {self.live[0].upper()} only")
+        else:
+            self.problem("fallback", None)
+        self.blocked = STATE.name in stale or THREAT.name in stale or not self.live
+        if self.pending:
+            self.try_blend()
+
     def on_plan(self, kind: str, plan: tuple[float, bool, PlanResult]) -> None:
         """(instant, planned against a threat, plan) of one planner."""
         if plan[0] < self.blended - 1e-6:
@@ -50,29 +78,32 @@ class WeightFbl(GraphNode):
         self.try_blend()
 
     def try_blend(self) -> None:
-        """Combine when the mode's plans of one instant are here; in ``combined`` mode, without the MPC's when
-        it has not come ``mpc_timeout`` after the MSF plan's instant (late, failed or silent: weight 0)."""
-        if self.estimate is None:
+        """Combine when the live planners' plans of one instant are here.  In ``combined`` mode with both
+        planners live, an instant whose MPC plan has not come ``mpc_timeout`` after it is blended from the
+        MSF plan alone (weight 0: the MPC was late or failed); a silent planner's plans are not waited for."""
+        if self.estimate is None or self.blocked:
             return
-        mpc, msf = self.pending.get("mpc"), self.pending.get("msf")
-        silent = False
-        if self.mode == "mpc" and mpc:
-            t, plans = mpc[0], (mpc[2], None)
-        elif self.mode == "msf" and msf:
-            t, plans = msf[0], (None, msf[2])
-        elif self.mode == "combined" and msf and mpc and abs(mpc[0] - msf[0]) < 1e-6 and mpc[1] == msf[1]:
-            # the two plans of one instant, made against the same threat (a planner that planned on its
-            # timer just before the threat arrived re-plans at the same stamp: wait for that plan)
-            t, plans = msf[0], (mpc[2], msf[2])
-        elif self.mode == "combined" and msf and self.rt.now() >= msf[0] + self.mpc_timeout - 1e-9:
-            t, plans, silent = msf[0], (None, msf[2]), True  # no MPC plan for this instant in time: weight 0
+        mpc, msf = (self.pending.get(k) if k in self.live else None for k in ("mpc", "msf"))
+        late = False
+        if self.live == ("mpc", "msf"):
+            if mpc and msf and abs(mpc[0] - msf[0]) < 1e-6 and mpc[1] == msf[1]:
+                pass  # the two plans of one instant, made against the same threat (a planner that planned on
+                # its timer just before the threat arrived re-plans at the same stamp: wait for that plan)
+            elif msf and self.rt.now() >= msf[0] + self.mpc_timeout - 1e-9:
+                mpc, late = None, True  # no MPC plan for this instant in time: weight 0
+            else:
+                return
+        elif not (mpc or msf):
+            return
+        t = (msf or mpc)[0]  # type: ignore[index]
+        record = self.step.combine(t, self.estimate, self.threat, mpc[2] if mpc else None, msf[2] if msf else None)
+        if late:
+            self.problem("late", WARN, "mpc_planner late: MSF only for this instant")
         else:
-            return
-        record = self.step.combine(t, self.estimate, self.threat, *plans)
-        self.level, self.message = (WARN, "mpc_planner late or silent: MSF only") if silent else (OK, "running")
+            self.problem("late", None)
         self.pending.clear()
         self.blended = t
-        self.values = {"weight_mpc": f"{record.blend.weight_mpc:.3f}"}
+        self.values = {"weight_mpc": f"{record.blend.weight_mpc:.3f}", "planners": ",".join(self.live)}
         self.pub_blend(cv.blend_to_msg(self.rt, t, record.blend, record.reference, record.delta_mpc))
         self.pub_ref(cv.reference_to_msg(self.rt, t, record.reference))
         self.pub_markers(cv.markers_to_msg(self.rt, t, record.threat, record.mpc, record.msf,
@@ -80,8 +111,8 @@ class WeightFbl(GraphNode):
 
     def on_state(self, estimate: StateEstimate) -> None:
         self.estimate = estimate
-        if "msf" in self.pending and self.mode == "combined":
+        if self.pending:
             self.try_blend()
         reference = self.step.reference_between(self.estimate)
-        if reference is not None and self.config.simulation.steering_fbl_at_motion_rate:
+        if reference is not None and not self.blocked:  # per estimate (the topic's designed rate)
             self.pub_ref(cv.reference_to_msg(self.rt, self.estimate.t, reference))

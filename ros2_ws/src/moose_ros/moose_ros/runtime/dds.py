@@ -245,8 +245,10 @@ class DdsNode(NodeBase):
 
         from ..interfaces import message_class
 
-        topic = Topic(self.participant, DISCOVERY_TOPIC, message_class(DISCOVERY_TYPE))
-        return DataWriter(self.participant, topic, qos=self._qos(DISCOVERY_QOS, True, DISCOVERY_TYPE))
+        self._graph_topic = Topic(self.participant, DISCOVERY_TOPIC, message_class(DISCOVERY_TYPE))
+        self._graph_reader: Any = None
+        self._graph_nodes: dict[bytes, list[tuple[str, str]]] = {}
+        return DataWriter(self.participant, self._graph_topic, qos=self._qos(DISCOVERY_QOS, True, DISCOVERY_TYPE))
 
     def graph_info(self, with_node: bool = True) -> Any:
         """This participant's ``ParticipantEntitiesInfo``: its GID and its node (unless ``with_node`` is
@@ -263,6 +265,23 @@ class DdsNode(NodeBase):
 
     def _publish_graph(self, with_node: bool) -> None:
         self._graph_writer.write(self.graph_info(with_node))
+
+    def node_names(self) -> list[tuple[str, str]]:
+        """(namespace, name) of the other nodes in the domain, as their participants announce them on
+        ``ros_discovery_info`` (the graph ``ros2 node list`` shows).  The first call starts listening:
+        participants found later are returned by later calls (discovery takes a few hundred ms)."""
+        from cyclonedds.sub import DataReader
+
+        if self._graph_reader is None:
+            self._graph_reader = DataReader(self.participant, self._graph_topic,
+                                            qos=self._qos(Qos(reliable=True, depth=1000, transient_local=True), False,
+                                                          DISCOVERY_TYPE))
+        own = bytes(gid(self.participant.guid))
+        for info in self._graph_reader.take(N=1000):
+            if hasattr(info, "gid"):
+                self._graph_nodes[bytes(info.gid.data)] = [(n.node_namespace, n.node_name)
+                                                          for n in info.node_entities_info_seq]
+        return sorted({n for key, nodes in self._graph_nodes.items() if key != own for n in nodes})
 
     # -- discovery checks ----------------------------------------------------------
     def _check_discovered(self, fresh: bool = False) -> list[tuple[str, Any]]:

@@ -133,6 +133,11 @@ class RclpyNode(NodeBase):
                 raise ParamError(f"{self.name}.{name} = {value!r} cannot be declared: {exc}") from None
         return value
 
+    def node_names(self) -> list[tuple[str, str]]:
+        """(namespace, name) of the other nodes in the graph (``ros2 node list``)."""
+        own = (self.namespace, self.name)
+        return sorted({(ns, name) for name, ns in self.node.get_node_names_and_namespaces() if (ns, name) != own})
+
     def count_publishers(self, topic: str) -> int:
         return self.node.count_publishers(self.resolve(topic))
 

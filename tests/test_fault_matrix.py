@@ -1,0 +1,92 @@
+"""The fault matrix: SIGKILL and a 0.6 s SIGSTOP of every node, in the topic graph and the CAN graph, in the middle
+of an evasive maneuver (moose_ros.faults).  In every case the car stays inside the field and either comes to a
+controlled stop (the minimum-risk maneuver) or completes the maneuver, and the run is reported as degraded with a
+non-zero exit status; a killed simulator (the world itself) is an incomplete run.
+
+Set ``MOOSE_FAULT_RATE`` to run the graph faster than real time where the machine holds that pace (the runs report
+a rate that is not held).  docs/design.md carries the matrix this code generates
+(``python -m moose_ros.faults --write docs/design.md``)."""
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+
+import pytest
+
+from isolation import claim_udp_port
+from moose_ros.faults import MATRIX_AT, MATRIX_BEGIN, MATRIX_END, MATRIX_GRAPHS, Fault, matrix_cases, run_case
+
+ROOT = Path(__file__).resolve().parents[1]
+RATE = float(os.environ.get("MOOSE_FAULT_RATE", "1.0"))
+CASES = [(graph, fault) for graph in MATRIX_GRAPHS for fault in matrix_cases(graph)]
+STOPS = {"observer", "obstacle_detector", "weight_fbl", "motion_controller"}
+"""Killing one of these leaves nothing that can drive: the minimum-risk maneuver stops the car."""
+
+
+@pytest.fixture(scope="module")
+def can_bus() -> dict[str, object]:
+    pid = os.getpid()
+    return {"can_interface": "udp_multicast", "can_channel": f"239.76.{pid % 250}.{1 + pid % 199}",
+            "can_port": claim_udp_port()}
+
+
+_RUNS: dict[tuple[str, str], dict] = {}
+
+
+def _run(graph: str, fault: Fault, can_bus: dict[str, object]) -> dict:
+    """Each case runs once per session (the dead-bridge test below reads the same run)."""
+    key = (graph, str(fault))
+    if key not in _RUNS:
+        _RUNS[key] = run_case(graph, fault, rate=RATE, params=can_bus if graph == "can" else None)
+    return _RUNS[key]
+
+
+@pytest.mark.graph
+@pytest.mark.slow
+@pytest.mark.parametrize("graph, fault", CASES, ids=[f"{g}-{f.node}-{f.action}" for g, f in CASES])
+def test_fault(graph: str, fault: Fault, can_bus: dict[str, object]) -> None:
+    summary = _run(graph, fault, can_bus)
+    log = summary["log"][-4000:]
+    kinds = {i["kind"] for i in summary["incidents"]}
+    assert summary["faults"] == [str(fault)] and "fault_injected" in kinds
+    assert summary["degraded"] and summary["exit_status"] != 0, log
+    if fault.node == "vehicle_simulator" and fault.action == "kill":  # the world ended: nothing to judge after it
+        assert summary["outcome"] == "incomplete" and summary["exit_status"] == 3
+        assert {"died", "cut_short"} <= kinds
+        return
+    if graph == "can" and fault.node == "can_bridge" and fault.action == "kill":
+        # nothing of the stack reaches the car: it coasts on an arc (clear or left_field, depending on where the
+        # run ends): said, not hidden; the stop it should end in is the next test's (a strict xfail)
+        assert "ecu_timeout" in kinds and "died" in kinds
+        return
+    assert summary["outcome"] in ("clear", "stopped_short"), f"{summary['outcome']}: {summary['reason']}\n{log}"
+    assert not summary["left_field"] and not summary["collided"] and not summary["lost_control"]
+    if fault.action == "kill":
+        assert "died" in kinds and summary["node_status"][fault.node].startswith("died")
+    if fault.action == "kill" and fault.node in STOPS:
+        assert "minimum_risk" in kinds
+        assert summary["final_speed_mps"] < 0.1, summary["final_speed_mps"]  # a controlled stop
+    if fault.action == "kill" and fault.node in ("mpc_planner", "msf_planner"):
+        assert "planner_fallback" in kinds and summary["outcome"] == "clear"  # the other planner completes it
+    if fault.action == "stall":
+        assert summary["node_exits"][fault.node] == 0  # it resumed and ended normally
+
+
+@pytest.mark.graph
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="a dead CAN bridge leaves the car to the vehicle ECUs' own command timeout, "
+                   "modelled as zero torque and the EPS stopped (steering held): the car coasts on an arc, 5.7 m/s "
+                   "when the run ends; no node of the stack can reach the car without the bridge.  Needs an "
+                   "ECU-side minimum-risk maneuver or a hardware watchdog on the car (docs/design.md)")
+def test_a_dead_bridge_still_ends_in_a_controlled_stop(can_bus: dict[str, object]) -> None:
+    summary = _run("can", Fault("can_bridge", "kill", MATRIX_AT), can_bus)
+    assert summary["final_speed_mps"] < 0.1 and "ecu_timeout" not in {i["kind"] for i in summary["incidents"]}
+
+
+def test_docs_carry_the_generated_matrix() -> None:
+    design = (ROOT / "docs" / "design.md").read_text(encoding="utf-8")
+    assert MATRIX_BEGIN in design and MATRIX_END in design
+    table = design.split(MATRIX_BEGIN, 1)[1].split(MATRIX_END, 1)[0]
+    rows = re.findall(r"^\| (full|can) \| (\w+) \| (kill|stall) \|", table, re.M)
+    assert sorted(rows) == sorted((g, f.node, f.action) for g, f in CASES)

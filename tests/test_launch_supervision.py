@@ -1,0 +1,183 @@
+"""``moose launch`` never reports a failure as a success, leaves no orphans and refuses a domain with leftovers:
+each probe of the reliability review, run from outside the launcher (its exit status, its JSON, /proc)."""
+from __future__ import annotations
+
+import io
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Iterator
+
+import pytest
+
+from moose.params import ParamError
+from moose.scenario import load_scenario
+from moose_ros.faults import Fault
+from moose_ros.launch import launch
+from moose_ros.process import descendants, spawn, stop
+
+pytestmark = [pytest.mark.graph, pytest.mark.slow]
+
+MOOSE = [sys.executable, "-m", "moose.cli"]
+NODES_FULL = 7
+
+
+class Launcher:
+    """``moose launch`` as a child process, its output collected by a thread."""
+
+    def __init__(self, args: list[str]) -> None:
+        self.proc = subprocess.Popen(MOOSE + ["launch", *args], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                     text=True)
+        self.lines: list[str] = []
+        threading.Thread(target=self._collect, daemon=True).start()
+
+    def _collect(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            self.lines.append(line)
+
+    def wait_started(self, count: int, limit: float = 120.0) -> None:
+        deadline = time.monotonic() + limit
+        while time.monotonic() < deadline:
+            if sum(" started" in line for line in list(self.lines)) >= count:
+                return
+            assert self.proc.poll() is None, "".join(self.lines[-40:])
+            time.sleep(0.1)
+        raise AssertionError("the nodes did not start:\n" + "".join(self.lines[-40:]))
+
+    def output(self) -> str:
+        return "".join(self.lines)
+
+
+@pytest.fixture
+def launcher() -> Iterator[list[Launcher]]:
+    started: list[Launcher] = []
+    yield started
+    for run in started:  # never leave a graph behind, whatever the test did
+        survivors = descendants(run.proc.pid)
+        if run.proc.poll() is None:
+            run.proc.kill()
+        run.proc.wait()
+        for pid in survivors:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+
+
+def _alive(pid: int) -> bool:
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat[stat.rindex(")") + 2] != "Z"
+
+
+def test_sigkill_of_the_launcher_leaves_no_node_running(launcher: list[Launcher]) -> None:
+    """Review: SIGKILL of the launcher left all seven nodes running, six for good."""
+    run = Launcher(["--scenario", "paper_v5_tau3", "--no-bag", "--rate", "0.5"])
+    launcher.append(run)
+    run.wait_started(NODES_FULL)
+    nodes = descendants(run.proc.pid)
+    assert len(nodes) >= NODES_FULL, nodes
+    run.proc.kill()
+    run.proc.wait()
+    time.sleep(5.0)
+    assert [pid for pid in nodes if _alive(pid)] == []
+
+
+def test_a_domain_with_nodes_of_another_graph_is_refused() -> None:
+    """Review: a new run on a domain with a killed run's nodes got another threat estimate, and once collided."""
+    leftover = spawn(MOOSE + ["node", "obstacle_detector", "--param", "use_sim_time=true"], stdout=subprocess.PIPE,
+                     stderr=subprocess.STDOUT, text=True)
+    try:
+        assert leftover.stdout is not None
+        assert "obstacle_detector started" in leftover.stdout.readline()
+        started = time.monotonic()
+        with pytest.raises(ParamError, match=r"already has nodes of a moose graph: /obstacle_detector; "):
+            launch(load_scenario("paper_v5_tau3"), {"scenario": "paper_v5_tau3"}, out=io.StringIO())
+        assert time.monotonic() - started < 10.0  # refused before any node started
+    finally:
+        stop([leftover])
+    assert leftover.returncode == 0  # SIGTERM ends a node normally
+
+
+@pytest.mark.parametrize("sig, status", [(signal.SIGTERM, 3), (signal.SIGINT, 130)], ids=["SIGTERM", "SIGINT"])
+def test_a_signal_to_the_launcher_is_incomplete_and_every_node_ends_normally(launcher: list[Launcher], tmp_path: Path,
+                                                                             sig: signal.Signals, status: int) -> None:
+    """Review: SIGTERM to the launcher was reported as collision-free, exit status 0.  Now the run is incomplete:
+    exit status 3, or 130 for Ctrl-C (SIGINT to the launcher alone, as a supervisor would send it)."""
+    summary_path = tmp_path / "summary.json"
+    run = Launcher(["--scenario", "paper_v5_tau3", "--no-bag", "--json", str(summary_path)])
+    launcher.append(run)
+    run.wait_started(NODES_FULL)
+    time.sleep(4.0)  # a few simulated seconds (the simulator starts the clock when every node announced itself)
+    run.proc.send_signal(sig)
+    assert run.proc.wait(60) == status, run.output()[-3000:]
+    summary = json.loads(summary_path.read_text())
+    assert summary["outcome"] == "incomplete" and summary["interrupted"] == sig.name
+    assert f"cut short ({sig.name} to the launcher)" in summary["reason"]
+    assert any(i["kind"] == "cut_short" for i in summary["incidents"])
+    # the nodes ended on the launcher's SIGTERM with status 0 (they were -15)
+    assert summary["node_exits"] == {name: 0 for name in summary["node_exits"]} and len(summary["node_exits"]) == 7
+    assert set(summary["node_status"].values()) <= {"stopped", "finished"}
+    assert "outcome         INCOMPLETE" in run.output() and f"exit status     {status}" in run.output()
+
+
+def test_no_odometry_at_all_is_incomplete(tmp_path: Path) -> None:
+    """Review: a run without odometry could be printed as collision-free.  The car graph has no ground truth."""
+    summary_path = tmp_path / "summary.json"
+    result = subprocess.run(MOOSE + ["launch", "car", "--can-interface", "virtual", "--can-channel",
+                                     f"nodom-{os.getpid()}", "--duration", "1", "--no-bag", "--json", str(summary_path)],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 3, result.stdout[-3000:] + result.stderr[-2000:]
+    summary = json.loads(summary_path.read_text())
+    assert summary["odom_samples"] == 0 and summary["outcome"] == "incomplete"
+    assert summary["reason"] == "no samples of the vehicle state" and summary["min_clearance_m"] is None
+    assert "odometry        none" in result.stdout
+
+
+def test_a_killed_simulator_is_incomplete_and_reported() -> None:
+    """Review: killing the simulator at 2.6 s gave a 2.6 s run reported as collision-free, exit status 0."""
+    out = io.StringIO()
+    summary = launch(load_scenario("paper_v5_tau3"), {"scenario": "paper_v5_tau3"}, out=out,
+                     faults=[Fault("vehicle_simulator", "kill", 2.6)])
+    assert summary["outcome"] == "incomplete" and summary["exit_status"] == 3, summary["reason"]
+    assert summary["node_exits"]["vehicle_simulator"] == -9 and summary["node_status"]["vehicle_simulator"].startswith("died")
+    kinds = {(i["node"], i["kind"]) for i in summary["incidents"]}
+    assert {("vehicle_simulator", "fault_injected"), ("vehicle_simulator", "died"), ("launch", "cut_short")} <= kinds
+    assert summary["degraded"] and 2.5 < summary["duration_s"] < 3.0
+
+
+def test_a_node_that_fails_to_start_ends_the_run_at_once(tmp_path: Path) -> None:
+    """A node that exits before it announced itself (here: a CAN log it cannot write) stops the run: no waiting a
+    minute for it, the run is incomplete and the node's own error is in the incident."""
+    from isolation import claim_udp_port
+
+    pid = os.getpid()
+    started = time.monotonic()
+    summary = launch(load_scenario("paper_v5_tau3"),
+                     {"scenario": "paper_v5_tau3", "can_log": str(tmp_path / "missing" / "dir" / "bus.log"),
+                      "can_interface": "udp_multicast", "can_channel": f"239.75.{pid % 250}.{1 + pid % 199}",
+                      "can_port": claim_udp_port()}, graph="can", out=io.StringIO())
+    assert time.monotonic() - started < 45.0
+    assert summary["node_status"]["can_bridge"] == "failed to start (exit status 2)"
+    failed = [i for i in summary["incidents"] if i["kind"] == "failed_to_start"]
+    assert failed and "can_log" in failed[0]["message"]
+    assert summary["outcome"] == "incomplete" and summary["exit_status"] == 3
+
+
+def test_a_rate_that_cannot_be_held_and_deadline_misses_are_reported() -> None:
+    """Review: under load ``--rate 3`` ran at 1.7x and the command lag reached 56 ms, and nothing said so.  At
+    ``--rate 25`` no machine of ours holds the pace: the summary must say so and count the misses."""
+    summary = launch(load_scenario("paper_v5_tau3"), {"scenario": "paper_v5_tau3"}, rate=25.0, out=io.StringIO())
+    achieved = summary["real_time_factor"]["achieved"]
+    assert summary["real_time_factor"]["requested"] == 25.0 and achieved is not None and achieved < 22.5
+    assert any(i["kind"] == "rate_not_held" for i in summary["incidents"])
+    assert sum(summary["deadline_misses"].values()) > 0
+    assert any(i["kind"] == "deadline_missed" for i in summary["incidents"])
