@@ -1,11 +1,10 @@
 """CAN layer: DBC round trip, bus load, CRC, malformed frames, command guard limits and timeout, bridge ↔ ECU."""
 from __future__ import annotations
 
+from typing import Callable
 
 import can
 import numpy as np
-from typing import Callable
-
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st

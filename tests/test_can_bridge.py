@@ -8,6 +8,8 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
+from can_hostile import clock_step, hostile_guard_params
+from can_hostile import wild as wild_value
 from moose.canbus.bridge import BridgeCore
 from moose.canbus.bus import BusLink, open_bus
 from moose.canbus.codec import PROTECTED, Codec, command_checksum, load_database
@@ -16,9 +18,6 @@ from moose.canbus.health import BusHealth, BusState, HealthParams, error_frame_s
 from moose.canbus.safety import Command, GuardParams, GuardState
 from moose.params import ParamError
 from moose.signals import EpsSample, GpsSample, ImuSample, WheelSpeedSample
-
-from can_hostile import clock_step, hostile_guard_params
-from can_hostile import wild as wild_value
 
 DB = load_database()
 GUARD = GuardParams()

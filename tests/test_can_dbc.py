@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from moose.canbus.bridge import LIMIT_SIGNALS, BridgeCore, check_limits_encodable
 from moose.canbus.busload import frame_loads, worst_case_bus_load, worst_case_frame_bits
 from moose.canbus.codec import (
     PROTECTED,
@@ -15,7 +16,6 @@ from moose.canbus.codec import (
     crc8_j1850,
     load_database,
 )
-from moose.canbus.bridge import LIMIT_SIGNALS, BridgeCore, check_limits_encodable
 from moose.canbus.safety import HARD_LIMIT, GuardParams
 from moose.params import VEHICLE_LIMITS, ParamError, VehicleParams
 from moose.resources import DBC_FILE

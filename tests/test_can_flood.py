@@ -33,9 +33,8 @@ import pytest
 from can.interfaces.udp_multicast.bus import SO_TIMESTAMPNS
 from can.interfaces.udp_multicast.utils import unpack_message
 
-from moose.canbus.codec import Codec
-
 from isolation import claim_udp_port
+from moose.canbus.codec import Codec
 
 FLOOD_RATE = 100_000
 """Junk frames per second the flooder aims at."""

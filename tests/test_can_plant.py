@@ -21,6 +21,7 @@ from moose.canbus.codec import default_database
 from moose.canbus.ecu import VehicleEcu
 from moose.canbus.safety import Command, GuardParams, GuardState
 from moose.params import VehicleParams
+from moose.schema import SensorParams
 from moose.sensors import Sensors
 from moose.signals import EpsSample, GpsSample, ImuSample, WheelSpeedSample
 from moose.vehicle import (
@@ -36,7 +37,6 @@ from moose.vehicle import (
     Y,
     initial_state,
 )
-from moose.schema import SensorParams
 
 pytestmark = [pytest.mark.can]
 

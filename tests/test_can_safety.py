@@ -7,10 +7,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from can_hostile import clock_step, hostile_guard_params, wild
 from moose.canbus.safety import Command, CommandGuard, GuardParams, GuardState
 from moose.params import VEHICLE_LIMITS, ParamError, VehicleParams
-
-from can_hostile import clock_step, hostile_guard_params, wild
 
 P = GuardParams()
 DT = 0.01

@@ -14,7 +14,6 @@ from moose.canbus.codec import Codec
 from moose.canbus.tools import dump, open_tool_bus, read_log, replay
 from moose.params import ParamError
 
-
 CHANNEL = f"moose-test-tools-{os.getpid()}"
 
 

@@ -9,8 +9,8 @@ from moose.detector import ObstacleDetector
 from moose.maneuver import MaxSteeringTable
 from moose.paper import PAPER_FRICTION
 from moose.params import ParamError, VehicleParams
-from moose.signals import Obstacle, StateEstimate
 from moose.schema import DetectorParams, ManeuverParams
+from moose.signals import Obstacle, StateEstimate
 
 VEHICLE = VehicleParams(mu=PAPER_FRICTION)  # the friction of the paper's nu
 

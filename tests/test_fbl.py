@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from moose.fbl import FeedbackLinearization
-from moose.schema import FblParams
 from moose.params import VehicleParams
+from moose.schema import FblParams
 from moose.signals import StateEstimate
 from moose.tire import peak_slip
 from moose.vehicle import DELTA, GAMMA, THETA, VX, VY, VehiclePlant, initial_state

@@ -21,8 +21,23 @@ import pytest
 from moose.signals import Obstacle, PlanResult, Reference, StateEstimate, Threat
 from moose_ros import convert as cv
 from moose_ros.graph import (
-    ACTUATOR_COMMAND, BLEND, DIAGNOSTICS, GPS, IMU, NODES, OBSTACLES, PLAN_MPC, PLAN_MSF, REFERENCE, STAMP_TOLERANCE,
-    STATE, STEERING, THREAT, TOPICS, WHEEL_SPEEDS, subscribes,
+    ACTUATOR_COMMAND,
+    BLEND,
+    DIAGNOSTICS,
+    GPS,
+    IMU,
+    NODES,
+    OBSTACLES,
+    PLAN_MPC,
+    PLAN_MSF,
+    REFERENCE,
+    STAMP_TOLERANCE,
+    STATE,
+    STEERING,
+    THREAT,
+    TOPICS,
+    WHEEL_SPEEDS,
+    subscribes,
 )
 from moose_ros.interfaces import make
 from moose_ros.runtime import DdsNode

@@ -6,14 +6,18 @@ import math
 import numpy as np
 import pytest
 
-from moose.maneuver import (
-    MaxSteeringTable, integrate_y_max, lateral_steering_index, maneuver_profile, time_to_collision,
-)
-from moose.params import ParamError, VehicleParams
-from moose.tire import pacejka
-from moose.schema import ManeuverParams
-from moose.paper import PAPER_EXPERIMENTS, PAPER_FRICTION, paper_y_max_fit
 from moose.calibration import calibrate, calibration_errors
+from moose.maneuver import (
+    MaxSteeringTable,
+    integrate_y_max,
+    lateral_steering_index,
+    maneuver_profile,
+    time_to_collision,
+)
+from moose.paper import PAPER_EXPERIMENTS, PAPER_FRICTION, paper_y_max_fit
+from moose.params import ParamError, VehicleParams
+from moose.schema import ManeuverParams
+from moose.tire import pacejka
 
 VEHICLE = VehicleParams(mu=PAPER_FRICTION)
 MU = VEHICLE.mu

@@ -8,9 +8,9 @@ import pytest
 
 from moose.motion import MotionController
 from moose.params import ParamError, VehicleParams
+from moose.schema import MotionParams
 from moose.signals import Reference, StateEstimate
 from moose.vehicle import DELTA, VX, VehiclePlant, initial_state
-from moose.schema import MotionParams
 
 P = VehicleParams()
 DT = 0.01

@@ -11,9 +11,8 @@ from moose.maneuver import MaxSteeringTable
 from moose.msf import MsfPlanner, zoh_rollout
 from moose.paper import PAPER_FRICTION
 from moose.params import ParamError, VehicleParams
-from moose.schema import Config, MsfParams
+from moose.schema import Config, DetectorParams, ManeuverParams, MsfParams
 from moose.signals import Obstacle, PlannerInput, StateEstimate
-from moose.schema import DetectorParams, ManeuverParams
 
 VEHICLE = VehicleParams(mu=PAPER_FRICTION)
 GRID = Config(vehicle=VEHICLE).grid

@@ -16,10 +16,10 @@ import pytest
 
 from moose.observer import StateObserver
 from moose.params import ParamError, VehicleParams, replace
+from moose.schema import ObserverParams, SensorParams
 from moose.sensors import Sensors
 from moose.signals import EpsSample, GpsSample, ImuSample, StateEstimate, WheelSpeedSample
 from moose.vehicle import DELTA, GAMMA, THETA, VX, VY, VehiclePlant, X, Y, initial_state
-from moose.schema import ObserverParams, SensorParams
 
 P = VehicleParams(mu=0.5)  # a test drive that excites the lateral dynamics
 V0 = 7.0

@@ -10,10 +10,10 @@ from moose.detector import ObstacleDetector
 from moose.maneuver import MaxSteeringTable, lateral_steering_index
 from moose.observer import StateObserver
 from moose.params import VehicleParams
+from moose.schema import DetectorParams, ManeuverParams, ObserverParams, SensorParams
 from moose.sensors import Sensors
 from moose.signals import EpsSample, GpsSample, ImuSample, Obstacle, StateEstimate, WheelSpeedSample
 from moose.vehicle import DELTA, VehiclePlant, initial_state
-from moose.schema import DetectorParams, ManeuverParams, ObserverParams, SensorParams
 
 P = VehicleParams()
 

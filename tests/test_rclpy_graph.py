@@ -42,8 +42,8 @@ from moose.metrics import summarize
 from moose.scenario import load_scenario
 from moose.simulation import simulate
 from moose_ros.graph import FRAME_IMU, FRAME_ODOM, FRAME_TRUTH, GRAPHS, TOPICS
-from moose_ros.launch import node_overrides
 from moose_ros.interfaces import typestore
+from moose_ros.launch import node_overrides
 
 pytestmark = [pytest.mark.graph, pytest.mark.slow]
 

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any, Iterator, Optional
 
 import pytest
+
 from rtps_capture import RtpsCapture
 
 ODOM, COMMAND = "nav_msgs/msg/Odometry", "moose_msgs/msg/ActuatorCommand"

@@ -18,12 +18,12 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from ros2_prefix import ros_prefix
 
 from moose.params import ParamError
 from moose_ros import runtime
 from moose_ros.graph import NODES, publishes, subscribes
 from moose_ros.interfaces import typestore
+from ros2_prefix import ros_prefix
 
 pytestmark = [pytest.mark.graph]
 

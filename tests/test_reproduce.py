@@ -8,7 +8,16 @@ import pytest
 
 from moose.config import load_config
 from moose.reproduce import (
-    COMPARISON, NINE, RUNS, Claim, Run, claims, render_claims, render_results, run_all, update_document,
+    COMPARISON,
+    NINE,
+    RUNS,
+    Claim,
+    Run,
+    claims,
+    render_claims,
+    render_results,
+    run_all,
+    update_document,
 )
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -11,17 +11,17 @@ import cyclonedds.idl.types as t
 import pytest
 from cyclonedds.core import Policy, Qos
 from cyclonedds.domain import DomainParticipant
-from isolation import claim_udp_port
-from cyclonedds.util import duration
 from cyclonedds.idl import IdlStruct
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
+from cyclonedds.util import duration
 
+from isolation import claim_udp_port
+from moose.config import load_config
 from moose.metrics import summarize
 from moose.params import ParamError
 from moose.scenario import load_scenario
 from moose.simulation import simulate
-from moose.config import load_config
 from moose_ros.launch import launch
 from moose_ros.runtime import DdsNode
 

@@ -12,7 +12,8 @@ import time
 from pathlib import Path
 
 import pytest
-from cyclonedds.core import Policy, Qos as DdsQos
+from cyclonedds.core import Policy
+from cyclonedds.core import Qos as DdsQos
 from cyclonedds.domain import DomainParticipant
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
@@ -20,7 +21,14 @@ from cyclonedds.topic import Topic
 from moose.params import ParamError
 from moose_ros.interfaces import message_class
 from moose_ros.runtime import (
-    QOS_DEFAULT, QOS_LATCHED, QOS_SENSOR, DdsNode, Qos, create_node, dds_topic_name, resolve_topic,
+    QOS_DEFAULT,
+    QOS_LATCHED,
+    QOS_SENSOR,
+    DdsNode,
+    Qos,
+    create_node,
+    dds_topic_name,
+    resolve_topic,
 )
 
 pytestmark = [pytest.mark.graph]

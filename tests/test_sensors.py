@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from moose.params import ParamError, VehicleParams
+from moose.schema import SensorParams
 from moose.sensors import Sensors
 from moose.signals import EpsSample, GpsSample, ImuSample, WheelSpeedSample
 from moose.vehicle import DELTA, GAMMA, OMEGA_RL, OMEGA_RR, THETA, VX, VY, X, Y
-from moose.schema import SensorParams
 
 P = VehicleParams()
 

@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from moose.msf import zoh_rollout
 from moose.fbl import FeedbackLinearization
+from moose.msf import zoh_rollout
 from moose.params import ParamError, VehicleParams
 from moose.schema import FblParams, WeightParams
 from moose.signals import Blend, Obstacle, PlanResult, StateEstimate, Threat

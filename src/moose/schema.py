@@ -20,8 +20,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Literal
 
-from .params import (ParamError, VehicleParams, check, non_negative, positive, replace,
-                     unit_interval)
+from .params import ParamError, VehicleParams, check, non_negative, positive, replace, unit_interval
 
 
 def _divides(period: float, step: float) -> bool:

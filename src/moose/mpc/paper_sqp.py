@@ -44,7 +44,7 @@ import numpy as np
 from ..params import check, positive
 from ..schema import MpcParams
 from .cost import Problem
-from .solver import CompiledCost, SolveResult, SolveStatus, Solver, register
+from .solver import CompiledCost, Solver, SolveResult, SolveStatus, register
 
 SqpReason = Literal["optimal", "small_step", "max_iter", "max_evals", "not_finite"]
 STATUS: dict[SqpReason, SolveStatus] = {

@@ -20,13 +20,40 @@ from typing import Any, Callable, Optional
 import numpy as np
 
 from moose.signals import (
-    ActuatorCommand, Blend, EpsSample, GpsSample, ImuSample, Obstacle, PlanResult, Reference, StateEstimate, Threat,
+    ActuatorCommand,
+    Blend,
+    EpsSample,
+    GpsSample,
+    ImuSample,
+    Obstacle,
+    PlanResult,
+    Reference,
+    StateEstimate,
+    Threat,
     WheelSpeedSample,
 )
 
 from .graph import (
-    ACTUATOR_COMMAND, BLEND, DIAGNOSTICS, FRAME_BASE, FRAME_GPS, FRAME_IMU, FRAME_ODOM, FRAME_TRUTH, GPS, IMU,
-    OBSTACLES, PLAN_MPC, PLAN_MSF, REFERENCE, SENSOR_MOUNTS, STAMP_TOLERANCE, STATE, STEERING, THREAT, WHEEL_SPEEDS,
+    ACTUATOR_COMMAND,
+    BLEND,
+    DIAGNOSTICS,
+    FRAME_BASE,
+    FRAME_GPS,
+    FRAME_IMU,
+    FRAME_ODOM,
+    FRAME_TRUTH,
+    GPS,
+    IMU,
+    OBSTACLES,
+    PLAN_MPC,
+    PLAN_MSF,
+    REFERENCE,
+    SENSOR_MOUNTS,
+    STAMP_TOLERANCE,
+    STATE,
+    STEERING,
+    THREAT,
+    WHEEL_SPEEDS,
     Topic,
 )
 

@@ -15,7 +15,13 @@ from typing import Any, Callable, Optional
 
 from .runtime.names import CLOCK_TOPIC, CLOCK_TYPE
 from .runtime.qos import (
-    QOS_CLOCK, QOS_CLOCK_READER, QOS_DEFAULT, QOS_LATCHED, QOS_LATCHED_READER, QOS_SENSOR, Qos,
+    QOS_CLOCK,
+    QOS_CLOCK_READER,
+    QOS_DEFAULT,
+    QOS_LATCHED,
+    QOS_LATCHED_READER,
+    QOS_SENSOR,
+    Qos,
 )
 
 COMMAND_TIMEOUT = 0.05

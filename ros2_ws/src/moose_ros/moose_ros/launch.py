@@ -30,10 +30,10 @@ import numpy as np
 from moose.config import load_config
 from moose.metrics import summarize
 from moose.params import ParamError, read_ros_params
-from moose.scenario import Scenario
-from moose.signals import Blend, Reference
 from moose.planning import PlanningRecord
+from moose.scenario import Scenario
 from moose.schema import Config
+from moose.signals import Blend, Reference
 from moose.simulation import SimulationResult
 
 from . import convert as cv

@@ -8,9 +8,8 @@ the bag is opened, so a bag left without ``metadata.yaml`` by a killed recorder 
 """
 from __future__ import annotations
 
-import struct
-
 import dataclasses
+import struct
 from pathlib import Path
 from typing import Any, Optional
 

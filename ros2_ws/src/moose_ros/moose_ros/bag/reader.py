@@ -114,7 +114,7 @@ class _Decoders:
         if not definition.strip():
             return f"type {type_name} is unknown here and the bag holds no definition of it"
         try:
-            from rosbags.typesys import Stores, get_types_from_idl, get_typestore, get_types_from_msg
+            from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 
             if encoding in ("ros2idl", "idl"):
                 sep = "=" * 80 + "\n"

@@ -6,7 +6,19 @@ from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
 
 from ..graph import (
-    ACTUATOR_COMMAND, BLEND, CLOCK, DIAGNOSTICS, MARKERS, OBSTACLES, ODOM, PLANS, REFERENCE, STATE, TF, TF_STATIC, THREAT,
+    ACTUATOR_COMMAND,
+    BLEND,
+    CLOCK,
+    DIAGNOSTICS,
+    MARKERS,
+    OBSTACLES,
+    ODOM,
+    PLANS,
+    REFERENCE,
+    STATE,
+    TF,
+    TF_STATIC,
+    THREAT,
     TOPICS,
 )
 from .errors import BagError

@@ -7,7 +7,12 @@ import json
 from typing import Any
 
 from moose.cli.common import (
-    add_scenario_arguments, check_output_dir, check_output_file, positive_float, run_folder, scenario_from_args,
+    add_scenario_arguments,
+    check_output_dir,
+    check_output_file,
+    positive_float,
+    run_folder,
+    scenario_from_args,
 )
 from moose.cli.simulate import format_summary
 from moose.params import ParamError

@@ -110,8 +110,16 @@ class DdsNode(NodeBase):
     def __init__(self, name: str, params_file: Optional[str] = None, overrides: Optional[dict[str, Any]] = None,
                  namespace: Optional[str] = None) -> None:
         from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication, BuiltinTopicDcpsSubscription
-        from cyclonedds.core import GuardCondition, InstanceState, Policy, Qos as DdsQos, ReadCondition, SampleState
-        from cyclonedds.core import ViewState, WaitSet
+        from cyclonedds.core import (
+            GuardCondition,
+            InstanceState,
+            Policy,
+            ReadCondition,
+            SampleState,
+            ViewState,
+            WaitSet,
+        )
+        from cyclonedds.core import Qos as DdsQos
         from cyclonedds.domain import DomainParticipant
 
         super().__init__(name, params_file, overrides or {}, namespace)
@@ -166,7 +174,8 @@ class DdsNode(NodeBase):
 
     @staticmethod
     def _qos(profile: Qos, writer: bool, type_name: str) -> Any:
-        from cyclonedds.core import Policy, Qos as DdsQos
+        from cyclonedds.core import Policy
+        from cyclonedds.core import Qos as DdsQos
         from cyclonedds.util import duration
 
         policies = [
