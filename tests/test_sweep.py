@@ -21,15 +21,15 @@ import pytest
 
 pytest.importorskip("pyarrow")
 
-from moose.cli import main  # noqa: E402
-from moose.config import load_config  # noqa: E402
-from moose.maneuver import MaxSteeringTable  # noqa: E402
-from moose.paper import PAPER_FRICTION  # noqa: E402
-from moose.params import ParamError, replace  # noqa: E402
-from moose.sweep.axes import parse_axis, unit_samples  # noqa: E402
-from moose.sweep.case import MACHINE_COLUMNS  # noqa: E402
-from moose.sweep.spec import SweepSpec  # noqa: E402
-from moose.sweep.store import read_results  # noqa: E402
+from moose.cli import main
+from moose.config import load_config
+from moose.maneuver import MaxSteeringTable
+from moose.paper import PAPER_FRICTION
+from moose.params import ParamError, replace
+from moose.sweep.axes import parse_axis, unit_samples
+from moose.sweep.case import MACHINE_COLUMNS
+from moose.sweep.spec import SweepSpec
+from moose.sweep.store import read_results
 
 MOOSE = [sys.executable, "-m", "moose.cli"]
 
