@@ -14,9 +14,10 @@ from moose.vehicle import DELTA, VX, VehiclePlant, initial_state
 
 P = VehicleParams()
 DT = 0.01
+MOTION = MotionParams()
 
 
-def run(reference: Reference, seconds: float, vx0: float = 5.0, params: MotionParams = MotionParams(),
+def run(reference: Reference, seconds: float, vx0: float = 5.0, params: MotionParams = MOTION,
         vehicle: VehicleParams = P) -> np.ndarray:
     """Closed loop at 100 Hz on the plant; rows (t, v_x, δ, T, δ̇_cmd)."""
     plant, ctrl = VehiclePlant(vehicle), MotionController(params, vehicle)

@@ -17,6 +17,7 @@ from moose.signals import Obstacle, PlannerInput, StateEstimate
 VEHICLE = VehicleParams(mu=PAPER_FRICTION)
 GRID = Config(vehicle=VEHICLE).grid
 T_S = 0.2
+MSF = MsfParams()
 
 
 @pytest.fixture(scope="module")
@@ -30,7 +31,7 @@ def estimate_of(t: float, s: np.ndarray) -> StateEstimate:
 
 
 def closed_loop(table: MaxSteeringTable, v: float, zone: Obstacle, steps: int = 40,
-                params: MsfParams = MsfParams()) -> tuple[np.ndarray, list]:
+                params: MsfParams = MSF) -> tuple[np.ndarray, list]:
     """Detector + MSF re-planning at 5 Hz on the kinematic model, applying the first input each time.
 
     Returns the states every 10 ms (the exact zero-order-hold parabolas between plans) and the plans.

@@ -16,9 +16,10 @@ from moose.signals import EpsSample, GpsSample, ImuSample, Obstacle, StateEstima
 from moose.vehicle import DELTA, VehiclePlant, initial_state
 
 P = VehicleParams()
+OBSERVER = ObserverParams()
 
 
-def double_lane_change(seed: int, observer_params: ObserverParams = ObserverParams(), seconds: float = 8.0):
+def double_lane_change(seed: int, observer_params: ObserverParams = OBSERVER, seconds: float = 8.0):
     plant = VehiclePlant(P)
     plant.reset(initial_state(P, vx=7.0))
     sensors = Sensors(SensorParams(), P, np.random.default_rng(seed))
