@@ -233,5 +233,5 @@ def update_document(path: Path, blocks: dict[str, str]) -> None:
         pattern = re.compile(rf"(<!-- BEGIN {re.escape(name)} -->\n).*?(<!-- END {re.escape(name)} -->)", re.S)
         if not pattern.search(text):
             raise ValueError(f"{path}: no '<!-- BEGIN {name} -->' ... '<!-- END {name} -->' block")
-        text = pattern.sub(lambda m: m.group(1) + body.rstrip("\n") + "\n" + m.group(2), text)
+        text = pattern.sub(lambda m, body=body: m.group(1) + body.rstrip("\n") + "\n" + m.group(2), text)
     path.write_text(text, encoding="utf-8")
