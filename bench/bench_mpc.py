@@ -203,7 +203,7 @@ def run_grid(label: str, grid: PlanningGrid, repeats: int, full: bool) -> None:
             baseline_planner = planner
     slsqp_times: list[float] = []
     slsqp_costs = np.zeros(len(problems))
-    for r in range(repeats):
+    for _ in range(repeats):
         for i, inp in enumerate(problems):
             elapsed, u = slsqp(reference, inp, base.caps)
             slsqp_times.append(elapsed)

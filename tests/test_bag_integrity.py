@@ -250,7 +250,7 @@ def wrong_state_type(path: Path) -> Path:
     """A bag whose /perception/state carries nav_msgs/msg/Odometry."""
     writer = BagWriter(path)
     odom = typestore().types["nav_msgs/msg/Odometry"]
-    for k, msg in enumerate(read_bag(EXTREME, ["/vehicle/odom", "/planning/blend"])):
+    for msg in read_bag(EXTREME, ["/vehicle/odom", "/planning/blend"]):
         topic = "/perception/state" if msg.topic == "/vehicle/odom" else msg.topic
         assert msg.topic != "/vehicle/odom" or isinstance(msg.msg, odom)
         writer.write(topic, msg.type_name, msg.timestamp_ns, typestore().serialize_cdr(msg.msg, msg.type_name))

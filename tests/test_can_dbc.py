@@ -84,7 +84,7 @@ def test_every_hard_limit_of_the_vehicle_is_encodable_in_the_command_frames() ->
 ])
 def test_a_dbc_that_cannot_carry_a_limit_is_refused_at_start_up(signal: str, text: str, limit: str) -> None:
     original = DBC_FILE.read_text()
-    line = next(l for l in original.splitlines() if f"SG_ {signal} :" in l)
+    line = next(row for row in original.splitlines() if f"SG_ {signal} :" in row)
     narrowed = line[:line.index("(")] + text + " " + line[line.index('"'):]
     db = cantools.database.load_string(original.replace(line, narrowed), "dbc")
     with pytest.raises(ParamError, match=rf"{limit} is invalid: CMD_\w+\.{signal} \(range .*\) cannot carry"):

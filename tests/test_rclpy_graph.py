@@ -217,7 +217,7 @@ def test_full_graph_on_rclpy_reproduces_the_lockstep_outcome_and_is_what_ros2_sh
         pubs, subs = report["graph"][name]["publishers"], report["graph"][name]["subscriptions"]
         # every publisher is a node of the contract, with the contract's QoS and the type's RIHS01 hash
         assert sorted(p[0] for p in pubs) == sorted(n for n in topic.publishers if n in nodes), name
-        for node_name, namespace, kind, type_hash, reliability, durability in pubs:
+        for _node_name, namespace, kind, type_hash, reliability, durability in pubs:
             assert (namespace, kind, type_hash) == ("/", topic.type, store.hash_rihs01(topic.type)), name
             assert reliability == ("RELIABLE" if topic.qos.reliable else "BEST_EFFORT"), name
             assert durability == ("TRANSIENT_LOCAL" if topic.qos.transient_local else "VOLATILE"), name
