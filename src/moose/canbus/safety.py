@@ -1,4 +1,5 @@
-"""The bridge's command guard: nothing outside the vehicle's limits reaches the car, and a silent controller ends in a stop.
+"""The bridge's command guard: nothing outside the vehicle's limits reaches the car, and a silent
+controller ends in a stop.
 
 **Limits.**  Whatever arrives on the command topic, every output of
 :meth:`CommandGuard.output` (one per command frame, period T_cmd) satisfies
@@ -119,7 +120,8 @@ class GuardParams:
 
     @classmethod
     def from_vehicle(cls, vehicle: object, **changes: object) -> "GuardParams":
-        """The limits of ``vehicle`` (a :class:`~moose.params.VehicleParams`); other fields from ``changes`` or the defaults."""
+        """The limits of ``vehicle`` (a :class:`~moose.params.VehicleParams`); other fields from ``changes`` or
+        the defaults."""
         limits = {name: getattr(vehicle, limit_name) for name, limit_name in HARD_LIMIT.items()}
         return cls(**limits, **changes)  # type: ignore[arg-type]
 
@@ -213,7 +215,8 @@ class CommandGuard:
         self._command = _Arrival(self._cycle)
 
     def observe_angle(self, delta: float) -> None:
-        """The steering angle the EPS measured (EPS_STATUS): end stops, steering back, and the angle to hold when idle."""
+        """The steering angle the EPS measured (EPS_STATUS): end stops, steering back, and the angle to hold
+        when idle."""
         if not _finite(delta):
             return
         self._angle = (_Arrival(self._cycle), float(delta))
