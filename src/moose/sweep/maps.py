@@ -118,7 +118,8 @@ class Cells:
         """Axes with too many values for columns (sampled ones): their points share the panels."""
         self.xcol = _column(x)[0]
         self.ycol = _column(y)[0] if y else None
-        self.groups: dict[tuple, dict[tuple[float, float], list[dict[str, Any]]]] = defaultdict(lambda: defaultdict(list))
+        self.groups: dict[tuple, dict[tuple[float, float], list[dict[str, Any]]]] = defaultdict(
+            lambda: defaultdict(list))
         for row in rows:
             key = (row["input.mu"], row["input.planner"], self.facet_of(row))
             xy = (float(row[self.xcol]), float(row[self.ycol]) if self.ycol else 0.0)
@@ -258,7 +259,8 @@ def clearance_map(cells: Cells, facets: Sequence[tuple], path: Path) -> Path:
     mappable = None
     for i, (mu, planner) in enumerate(combos):
         for j, facet in enumerate(facets):
-            mappable = _panel(axes[i, j], cells, cells.cells(mu, planner, facet), min_clearance, "RdYlGn", norm) or mappable
+            mappable = (_panel(axes[i, j], cells, cells.cells(mu, planner, facet), min_clearance, "RdYlGn", norm)
+                        or mappable)
     _decorate(cells, axes, [f"{p}, {_mu_label(mu)}" for mu, p in combos], facets)
     if mappable is not None:
         fig.colorbar(mappable, ax=axes, shrink=0.6, label="min clearance (m, ≤ 0: collision)")
@@ -294,10 +296,11 @@ def envelope_map(cells: Cells, facets: Sequence[tuple], path: Path, paper: Seque
     handles = [Line2D([], [], color=PLANNER_STYLE.get(p, ("k", "-"))[0], linestyle=PLANNER_STYLE.get(p, ("k", "-"))[1],
                       label=f"{p}: safe-envelope boundary") for p in cells.planners]
     if paper:
-        handles.append(Line2D([], [], marker="*", color="gold", markeredgecolor="k", linestyle="", label="paper's experiment"))
+        handles.append(Line2D([], [], marker="*", color="gold", markeredgecolor="k", linestyle="",
+                              label="paper's experiment"))
     fig.legend(handles=handles, loc="outside lower center", ncol=2, fontsize=8, frameon=False)
-    fig.suptitle("safe envelope (outcome clear for every seed; pale green: the combined planner's safe cells, grey: not)",
-                 fontsize=9)
+    fig.suptitle("safe envelope (outcome clear for every seed; pale green: the combined planner's safe cells, "
+                 "grey: not)", fontsize=9)
     return _save(fig, path)
 
 
@@ -423,7 +426,8 @@ def draw_maps(folder: Path, out: Path, x: Optional[str] = None, y: Optional[str]
     chunks = [cells.facets[i:i + FACETS_PER_FIGURE] for i in range(0, len(cells.facets), FACETS_PER_FIGURE)]
     for k, facets in enumerate(chunks):
         suffix = f"_{k + 1}" if len(chunks) > 1 else ""
-        figures.append(("Safe envelope per planner", envelope_map(cells, facets, out / f"envelope{suffix}.png", points)))
+        envelope = envelope_map(cells, facets, out / f"envelope{suffix}.png", points)
+        figures.append(("Safe envelope per planner", envelope))
         advantage = advantage_map(cells, facets, out / f"advantage{suffix}.png")
         if advantage is not None:
             figures.append(("Where the combined planner beats MPC alone and MSF alone", advantage))
@@ -458,7 +462,8 @@ def write_report(path: Path, rows: Sequence[dict[str, Any]], cells: Cells, figur
                      f"<p>axes: <code>{esc(axes)}</code></p>")
     parts.append(f"<p>Panels: x = {esc(_column(cells.x)[1])}, y = {esc(_column(cells.y)[1] if cells.y else '-')}; "
                  f"columns: {esc(', '.join(cells.facet_axes) or 'one')}"
-                 + (f"; sampled axes shown in the same panels: {esc(', '.join(cells.projected))}" if cells.projected else "")
+                 + (f"; sampled axes shown in the same panels: {esc(', '.join(cells.projected))}"
+                    if cells.projected else "")
                  + ". A cell aggregates its seeds: the most severe "
                  "outcome, the smallest clearance; it is safe when every seed is <i>clear</i> (passed the obstacle "
                  "without collision and without loss of control, inside the field).</p>")

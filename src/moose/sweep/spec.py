@@ -100,7 +100,8 @@ class SweepSpec:
                 if isinstance(value, bool) or not isinstance(value, (int, float)):
                     raise ParamError(f"{FLAGS[axis.name]} {value!r} is invalid: expected a number")
         order = ["mu", *sorted(n for n in full if n.startswith("set.")), "speed", "tau",
-                 "half_width" if "half_width" in full else "nu", "length", "duration", "field_margin", "seed", "planner"]
+                 "half_width" if "half_width" in full else "nu", "length", "duration", "field_margin", "seed",
+                 "planner"]
         crossed = [full[n] for n in order if not full[n].sampled]
         sampled = [full[n] for n in order if full[n].sampled]
         cases: list[Case] = []
