@@ -184,7 +184,8 @@ def maneuver_profile(vehicle: VehicleParams, mu: float, speeds: Sequence[float] 
     q_value = np.array(_coefficients(vehicle, mu) + (sgn * vehicle.delta_max,))
     # the map concatenates the speeds' (rows × n_chunks) blocks horizontally
     states, rates = (np.asarray(a).reshape(-1, v.size, n_chunks) for a in run(state, v.reshape(1, -1), q_value))
-    ys, vYs, aYs, thetas = (np.vstack([a, np.zeros((n_chunks, v.size))]) for a in (prof.y, prof.vY, prof.aY, prof.theta))
+    ys, vYs, aYs, thetas = (np.vstack([a, np.zeros((n_chunks, v.size))])
+                            for a in (prof.y, prof.vY, prof.aY, prof.theta))
     ys[head + 1:] = states[3].T
     thetas[head + 1:] = states[2].T
     vYs[head + 1:] = rates[0].T
