@@ -492,7 +492,8 @@ def bag_info(path: str | Path, report: Optional[ReadReport] = None) -> dict[str,
     first = last = None
     report = report if report is not None else ReadReport(str(path))
     for m in read_bag(path, report=report):
-        entry = stats.setdefault(m.topic, {"type": m.type_name, "count": 0, "first": m.timestamp_ns, "last": m.timestamp_ns})
+        entry = stats.setdefault(m.topic, {"type": m.type_name, "count": 0, "first": m.timestamp_ns,
+                                           "last": m.timestamp_ns})
         entry["count"] += 1
         entry["last"] = m.timestamp_ns
         first = m.timestamp_ns if first is None else min(first, m.timestamp_ns)
@@ -501,6 +502,7 @@ def bag_info(path: str | Path, report: Optional[ReadReport] = None) -> dict[str,
     topics = {}
     for topic, e in sorted(stats.items()):
         span = (e["last"] - e["first"]) * 1e-9
-        topics[topic] = {"type": e["type"], "count": e["count"], "rate_hz": (e["count"] - 1) / span if span > 0 else math.nan}
+        topics[topic] = {"type": e["type"], "count": e["count"],
+                         "rate_hz": (e["count"] - 1) / span if span > 0 else math.nan}
     return {"path": str(path), "duration_s": duration, "messages": sum(e["count"] for e in stats.values()),
             "topics": topics, "losses": report.losses(), "registered_types": list(report.registered)}

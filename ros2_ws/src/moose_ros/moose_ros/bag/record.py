@@ -113,7 +113,8 @@ def record_result(result: Any, path: str | Path) -> dict[str, int]:
     for record in result.planning:
         for kind, plan in (("mpc", record.mpc), ("msf", record.msf)):
             if plan is not None:
-                add(record.t, PLANS[kind].name, cv.plan_to_msg(factory, record.t, kind, plan, record.threat is not None))
+                add(record.t, PLANS[kind].name,
+                    cv.plan_to_msg(factory, record.t, kind, plan, record.threat is not None))
         add(record.t, BLEND.name, cv.blend_to_msg(factory, record.t, record.blend, record.reference,
                                                      record.delta_mpc))
         estimate = result.estimates[int(round(record.t * result.config.simulation.motion_rate_hz))]  # one per tick

@@ -108,7 +108,8 @@ def _replan(reader: BagReader, topics: list[str], step: Any, planner: str, v_des
         "steps": len(rows), "planner": planner,
         "rms_ax": diff("recorded_ax", "ax"), "rms_ay": diff("recorded_ay", "ay"),
         "rms_weight": diff("recorded_weight", "weight"), "rms_delta": diff("recorded_delta", "delta"),
-        "mpc_status_agreement": (sum(r["recorded_mpc_status"] == r["mpc_status"] for r in same) / len(same)) if same else None,
+        "mpc_status_agreement": (sum(r["recorded_mpc_status"] == r["mpc_status"] for r in same) / len(same)
+                                 if same else None),
         "invalid_messages": invalid,
     }
     return {"summary": summary, "rows": rows}
