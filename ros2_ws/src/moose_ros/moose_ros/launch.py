@@ -102,7 +102,8 @@ class Monitor:
         rows = np.array(sorted(self.odom)) if self.odom else np.zeros((0, 7))  # no odometry: judged incomplete
         trace = {name: rows[:, i] for i, name in enumerate(("t", "x", "y", "theta", "vx", "vy", "delta"))}
         planning = [
-            PlanningRecord(t, threat, plan, None, Blend(self.weights.get(t, float("nan")), plan.accel), Reference(0.0, 0.0), float("nan"))
+            PlanningRecord(t, threat, plan, None, Blend(self.weights.get(t, float("nan")), plan.accel),
+                           Reference(0.0, 0.0), float("nan"))
             for t, plan, threat in self.plans
         ]
         return SimulationResult(self.scenario, planner, seed, trace, planning, self.first_threat,  # type: ignore[arg-type]
@@ -139,7 +140,8 @@ def node_overrides(graph: str, planner: str, params: Optional[dict[str, Any]] = 
         from moose.canbus.bus import INTERFACES
 
         if given["can_interface"] not in INTERFACES:
-            raise ParamError(f"can_interface = {given['can_interface']!r} is invalid: expected one of {list(INTERFACES)}")
+            raise ParamError(f"can_interface = {given['can_interface']!r} is invalid: "
+                             f"expected one of {list(INTERFACES)}")
     taken = set().union(*(parameter_names(n) for n in nodes))
     unknown = sorted(k for k in given if "." not in k and k not in taken)
     if unknown:
@@ -231,7 +233,8 @@ def launch(
         threading.Thread(target=stream, args=(name, proc), daemon=True).start()
 
     exits: dict[str, int] = {}
-    limit = time.monotonic() + (duration if duration is not None else (scenario.lead_time + scenario.duration) / rate + 60.0)
+    limit = time.monotonic() + (duration if duration is not None
+                                else (scenario.lead_time + scenario.duration) / rate + 60.0)
     stop = threading.Event()
     previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)} \
         if threading.current_thread() is threading.main_thread() else {}
