@@ -93,7 +93,8 @@ def _same_length(kind: str, first: tuple[str, np.ndarray], second: tuple[str, np
     if a.size < minimum:
         raise InvalidMessage(f"{kind}.{name_a} (length {a.size}) is invalid: expected at least {minimum} element(s)")
     if a.shape != b.shape:
-        raise InvalidMessage(f"{kind}.{name_b} (length {b.size}) is invalid: expected the length of {name_a} ({a.size})")
+        raise InvalidMessage(f"{kind}.{name_b} (length {b.size}) is invalid: "
+                             f"expected the length of {name_a} ({a.size})")
 
 
 def checked_time(msg: Any, now: Optional[float] = None) -> float:
@@ -213,8 +214,10 @@ def plan_from_msg(msg: Any) -> PlanResult:
     predicted path (positions and velocities) of equal lengths, a finite non-negative solve time, a finite
     cost (1e300 and above: none)."""
     if msg.status not in STATUS_NAMES:
-        raise InvalidMessage(f"PlannerOutput.status = {msg.status!r} is invalid: expected one of {sorted(STATUS_NAMES)}")
-    ax, ay = _finite_array("PlannerOutput", "accel_x", msg.accel_x), _finite_array("PlannerOutput", "accel_y", msg.accel_y)
+        raise InvalidMessage(f"PlannerOutput.status = {msg.status!r} is invalid: "
+                             f"expected one of {sorted(STATUS_NAMES)}")
+    ax = _finite_array("PlannerOutput", "accel_x", msg.accel_x)
+    ay = _finite_array("PlannerOutput", "accel_y", msg.accel_y)
     _same_length("PlannerOutput", ("accel_x", ax), ("accel_y", ay))
     columns = [(f, _finite_array("PlannerOutput", f, getattr(msg, f)))
                for f in ("predicted_x", "predicted_y", "predicted_vx", "predicted_vy")]

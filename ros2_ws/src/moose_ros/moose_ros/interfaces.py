@@ -70,7 +70,8 @@ def typestore() -> Any:
     folder = msg_dir()
     files = sorted(folder.glob("*.msg"))
     if not files:
-        raise FileNotFoundError(f"no .msg files in {folder}: reinstall moose_ros or set MOOSE_MSG_DIR to moose_msgs/msg")
+        raise FileNotFoundError(f"no .msg files in {folder}: "
+                                "reinstall moose_ros or set MOOSE_MSG_DIR to moose_msgs/msg")
     definitions: dict[str, Any] = {}
     for path in files:
         definitions.update(get_types_from_msg(path.read_text(encoding="utf-8"), f"{MSG_PACKAGE}/msg/{path.stem}"))

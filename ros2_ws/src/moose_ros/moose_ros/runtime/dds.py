@@ -179,7 +179,8 @@ class DdsNode(NodeBase):
         from cyclonedds.util import duration
 
         policies = [
-            Policy.Reliability.Reliable(duration(milliseconds=100)) if profile.reliable else Policy.Reliability.BestEffort,
+            (Policy.Reliability.Reliable(duration(milliseconds=100)) if profile.reliable
+             else Policy.Reliability.BestEffort),
             Policy.History.KeepLast(profile.depth),
             Policy.Durability.TransientLocal if profile.transient_local else Policy.Durability.Volatile,
             Policy.Userdata(endpoint_user_data(type_name)),
@@ -319,7 +320,8 @@ class DdsNode(NodeBase):
                 continue
             if own_kind == "subscription":  # remote writer, our reader
                 if qos.reliable and not reliable:
-                    self._report((topic, kind, "reliability"), f"topic {topic!r}: a remote publisher offers best effort, "
+                    self._report((topic, kind, "reliability"),
+                                 f"topic {topic!r}: a remote publisher offers best effort, "
                                  "this subscription requests reliable; they will not communicate")
                 if qos.transient_local and not transient:
                     self._report((topic, kind, "durability"), f"topic {topic!r}: a remote publisher offers volatile, "
