@@ -1,4 +1,5 @@
-"""The bridge's command guard: the vehicle's limits, clock steps, hostile input and configuration, the minimum-risk maneuver."""
+"""The bridge's command guard: the vehicle's limits, clock steps, hostile input and configuration, the minimum-risk
+maneuver."""
 from __future__ import annotations
 
 import math
@@ -36,17 +37,19 @@ def test_limits_are_the_vehicles_hard_limits_and_configuration_can_only_tighten_
         VEHICLE_LIMITS.delta_max, VEHICLE_LIMITS.delta_rate_max, VEHICLE_LIMITS.T_max, VEHICLE_LIMITS.torque_rate_max)
     tight = VehicleParams(delta_max=0.2, delta_rate_max=0.5, T_max=150.0, torque_rate_max=1000.0)
     g = GuardParams.from_vehicle(tight, timeout=0.03)
-    assert (g.delta_max, g.steer_rate_limit, g.torque_max, g.torque_rate_limit, g.timeout) == (0.2, 0.5, 150.0, 1000.0, 0.03)
+    assert ((g.delta_max, g.steer_rate_limit, g.torque_max, g.torque_rate_limit, g.timeout)
+            == (0.2, 0.5, 150.0, 1000.0, 0.03))
     assert g.brake_torque == 150.0  # the braking torque follows the tightened T_max
     # looser than the vehicle: refused at start-up, naming the field and the value
     for field, value in (("delta_max", 0.5), ("delta_max", 3.0), ("torque_max", 300.0), ("steer_rate_limit", 2.0),
                          ("torque_rate_limit", 5000.0)):
-        with pytest.raises(ParamError, match=rf"{field} = {value!r} is invalid: expected at most the vehicle's hard limit"):
+        with pytest.raises(ParamError,
+                           match=rf"{field} = {value!r} is invalid: expected at most the vehicle's hard limit"):
             GuardParams(**{field: value})
     with pytest.raises(ParamError, match="timeout = 0.5 is invalid"):
         GuardParams(timeout=0.5)  # longer than the vehicle ECUs' own 50 ms would keep a dead controller's command alive
-    for field, value in (("timeout", 0.0), ("brake_gain", float("inf")), ("delta_max", float("nan")), ("stop_time", -1.0),
-                         ("brake_fraction", 1.5), ("eps_gain", True)):
+    for field, value in (("timeout", 0.0), ("brake_gain", float("inf")), ("delta_max", float("nan")),
+                         ("stop_time", -1.0), ("brake_fraction", 1.5), ("eps_gain", True)):
         with pytest.raises(ParamError, match=rf"{field} = "):
             GuardParams(**{field: value})
     with pytest.raises(ParamError, match="timeout = 0.01 is invalid: expected at least one command period"):
@@ -131,9 +134,11 @@ def hostile_params(draw: st.DrawFn) -> tuple[GuardParams, float]:
 
 @settings(max_examples=400, deadline=None)
 @given(hostile_params(),
-       st.lists(st.tuples(clock_step, st.one_of(st.none(), st.tuples(wild, wild, wild, wild)), st.one_of(st.none(), wild),
-                          st.one_of(st.none(), st.tuples(wild, wild))), min_size=1, max_size=80))
-def test_any_input_any_clock_any_valid_config_stays_inside_the_limits_and_times_out(config: tuple, stream: list) -> None:
+       st.lists(st.tuples(clock_step, st.one_of(st.none(), st.tuples(wild, wild, wild, wild)),
+                          st.one_of(st.none(), wild), st.one_of(st.none(), st.tuples(wild, wild))),
+                min_size=1, max_size=80))
+def test_any_input_any_clock_any_valid_config_stays_inside_the_limits_and_times_out(config: tuple,
+                                                                                     stream: list) -> None:
     p, period = config
     guard = CommandGuard(p, period)
     t, previous = 0.0, guard.output(0.0)
@@ -197,7 +202,8 @@ def test_an_invalid_command_starts_the_minimum_risk_maneuver_at_once_and_a_valid
     assert before == Command(0.1, 0.5, 100.0, 100.0)
     guard.receive(Command(0.1, float("nan"), 100.0, 100.0))
     out = guard.output(0.30)
-    assert guard.state == GuardState.MINIMUM_RISK and guard.invalid == 1 and guard.pop_invalid() and not guard.pop_invalid()
+    assert guard.state == GuardState.MINIMUM_RISK and guard.invalid == 1
+    assert guard.pop_invalid() and not guard.pop_invalid()
     assert out.steering_angle == pytest.approx(0.09) and out.torque_rl == pytest.approx(80.0)  # back towards 0
     guard.output(0.31)
     guard.receive(Command(-0.2, 0.5, 100.0, 100.0))

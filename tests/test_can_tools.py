@@ -1,4 +1,5 @@
-"""`moose can` tools on hostile input: corrupt and unknown logs, bad ports and interfaces give a ParamError, never a traceback."""
+"""`moose can` tools on hostile input: corrupt and unknown logs, bad ports and interfaces give a ParamError, never a
+traceback."""
 from __future__ import annotations
 
 import gzip
