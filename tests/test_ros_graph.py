@@ -174,7 +174,8 @@ def test_bad_input_gives_clear_errors(tmp_path: Path) -> None:
     assert missing.returncode == 2 and "no such file" in missing.stderr
     bad = tmp_path / "bad.yaml"
     bad.write_text("/**:\n  ros__parameters:\n    vehicle: {m: heavy}\n")
-    wrong = subprocess.run(moose + ["node", "observer", "--params", str(bad)], capture_output=True, text=True, timeout=60)
+    wrong = subprocess.run(moose + ["node", "observer", "--params", str(bad)], capture_output=True, text=True,
+                           timeout=60)
     assert wrong.returncode == 2 and "vehicle.m = 'heavy'" in wrong.stderr
     node = DdsNode("typo_check")
     publish = node.publisher("nav_msgs/msg/Odometry", "/vehicle/odom")

@@ -124,7 +124,8 @@ def test_pub_sub_round_trip_between_two_processes_at_100_hz() -> None:
             sent[0] += 1
 
     try:
-        assert spin_until(node, lambda: ping.subscription_count() > 0 and node.count_publishers("/rt_test/pong") > 0, 20)
+        assert spin_until(node, lambda: ping.subscription_count() > 0 and node.count_publishers("/rt_test/pong") > 0,
+                          20)
         node.timer(0.01, tick)
         assert spin_until(node, lambda: len(pongs) >= count, 30)
         ping(node.make(WHEELS, omega_rl=-1.0))  # end marker
