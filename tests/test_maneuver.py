@@ -226,7 +226,8 @@ def test_time_to_collision() -> None:
 def test_lateral_steering_index(table: MaxSteeringTable) -> None:
     assert lateral_steering_index(2.0, 2.0, 7.0, table) == pytest.approx(2.0 / table.y_max(2.0, 7.0))
     assert lateral_steering_index(2.0, 3.0, 7.0, table) < lateral_steering_index(2.0, 1.5, 7.0, table)
-    assert lateral_steering_index(4.0, 2.0, 7.0, table) == pytest.approx(2.0 * lateral_steering_index(2.0, 2.0, 7.0, table))
+    assert (lateral_steering_index(4.0, 2.0, 7.0, table)
+            == pytest.approx(2.0 * lateral_steering_index(2.0, 2.0, 7.0, table)))
     assert lateral_steering_index(2.0, 0.0, 7.0, table) == math.inf  # no time left
     assert lateral_steering_index(2.0, -0.5, 7.0, table) == math.inf  # beside the zone
     assert lateral_steering_index(2.0, 1.0, 0.0, table) == math.inf  # a car at rest cannot move aside

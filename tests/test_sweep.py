@@ -149,7 +149,8 @@ def test_a_folder_of_another_sweep_is_refused(tmp_path: Path, capsys: pytest.Cap
     out = tmp_path / "s"
     assert main(BASE + ["-o", str(out), "--workers", "1"]) == 0
     before = (out / "cases.jsonl").read_bytes()
-    assert main(["sweep", "--speed", "6", "--tau", "2", "--nu", "0.5", "--duration", "2", "-o", str(out), "--quiet"]) == 2
+    assert main(["sweep", "--speed", "6", "--tau", "2", "--nu", "0.5", "--duration", "2", "-o", str(out),
+                 "--quiet"]) == 2
     assert "holds a different sweep" in capsys.readouterr().err
     assert main(BASE + ["-o", str(out)]) == 2  # the same sweep again: only with --resume
     assert "--resume continues it" in capsys.readouterr().err
@@ -281,7 +282,8 @@ def test_failing_cases_are_recorded_and_the_sweep_goes_on(tmp_path: Path) -> Non
     # case from the moment it is started.
     out2 = tmp_path / "s2"
     args2 = MOOSE + ["sweep", "--speed", "6", "--tau", "2", "--nu", "0.5", "--planner", "msf", "--duration", "60",
-                     "--set", "simulation.plant_dt=0.0001", "--seeds", "3", "--workers", "2", "-o", str(out2), "--quiet"]
+                     "--set", "simulation.plant_dt=0.0001", "--seeds", "3", "--workers", "2", "-o", str(out2),
+                   "--quiet"]
     process = subprocess.Popen(args2, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
 
     def workers() -> list[int]:
@@ -410,7 +412,8 @@ def test_a_journal_line_cut_by_a_kill_costs_only_that_case(tmp_path: Path) -> No
             "-o", str(out), "--workers", "1", "--quiet"]
     assert main(args) == 0
     lines = (out / "cases.jsonl").read_text().splitlines()
-    (out / "cases.jsonl").write_text(lines[0] + "\n" + lines[1][: len(lines[1]) // 2])  # as a SIGKILL mid-write leaves it
+    # as a SIGKILL mid-write leaves it
+    (out / "cases.jsonl").write_text(lines[0] + "\n" + lines[1][: len(lines[1]) // 2])
     assert main(args + ["--resume"]) == 0  # reruns the cut case only
     rows = rows_of(out)
     assert len(rows) == 2 and {r["case_id"] for r in rows} == {json.loads(line)["case_id"] for line in lines}

@@ -17,7 +17,8 @@ END = 8.0
 VERDICT = VerdictParams()
 
 
-def straight(y: float = 3.0, v: float = 6.0, dt: float = 0.01, end: float = END, x0: float = 0.0) -> dict[str, np.ndarray]:
+def straight(y: float = 3.0, v: float = 6.0, dt: float = 0.01, end: float = END,
+             x0: float = 0.0) -> dict[str, np.ndarray]:
     t = np.arange(0.0, end + 1e-9, dt)
     return {"t": t, "x": x0 + v * t, "y": np.full_like(t, y), "theta": np.zeros_like(t), "vx": np.full_like(t, v),
             "vy": np.zeros_like(t)}
