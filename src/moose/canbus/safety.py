@@ -52,7 +52,7 @@ import numbers
 from typing import Optional
 
 from moose.motion import MotionParams
-from moose.params import VEHICLE_LIMITS, ParamError, check
+from moose.params import VEHICLE_LIMITS, ParamError, at_most, check
 
 from .ecu import ECU_TIMEOUT
 
@@ -107,7 +107,7 @@ class GuardParams:
             check(f.name, getattr(self, f.name), _positive_finite, "a positive finite number")
         for name, limit_name in HARD_LIMIT.items():
             limit = getattr(VEHICLE_LIMITS, limit_name)
-            check(name, getattr(self, name), lambda v, limit=limit: v <= limit,
+            check(name, getattr(self, name), at_most(limit),
                   f"at most the vehicle's hard limit {limit_name} = {limit:g} (configuration can only tighten it)")
         check("timeout", self.timeout, lambda v: v <= ECU_TIMEOUT,
               f"at most the vehicle ECUs' command timeout {ECU_TIMEOUT:g} s")
