@@ -14,12 +14,13 @@ import os
 import re
 import types as pytypes
 from functools import lru_cache
-from importlib.resources import files
 from pathlib import Path
 from typing import Any
 
 from rosbags.interfaces import Nodetype
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from moose.resources import package_folder
 
 MSG_PACKAGE = "moose_msgs"
 
@@ -52,7 +53,7 @@ def msg_dir() -> Path:
     env = os.environ.get("MOOSE_MSG_DIR")
     if env:
         return Path(env)
-    shipped = Path(os.fspath(files("moose_ros").joinpath("msg")))
+    shipped = package_folder("moose_ros", "msg")
     if any(shipped.glob("*.msg")):
         return shipped
     try:
