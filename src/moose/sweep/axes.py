@@ -92,8 +92,8 @@ def parse_axis(name: str, text: str, label: Optional[str] = None) -> Axis:
         if count > MAX_CASES:
             raise ParamError(f"{name} = {text!r} is an invalid range: {count} values")
         integral = all(isinstance(v, int) for v in (low, high, step))
-        values = [low + k * step if integral else round(low + k * step, 12) for k in range(count)]
-        return Axis(axis_name, tuple(values))
+        grid = [low + k * step if integral else round(low + k * step, 12) for k in range(count)]
+        return Axis(axis_name, tuple(grid))
     values = tuple(_scalar(part.strip(), name) for part in text.split(","))
     if any(v == "" for v in values):
         raise ParamError(f"{name} = {text!r} is invalid: an empty value in the list")
