@@ -13,12 +13,12 @@ from __future__ import annotations
 import dataclasses
 import re
 from pathlib import Path
-from typing import Any, Callable, Iterable, Optional, Sequence
+from typing import Any, Callable, Iterable, Literal, Optional, Sequence, Union
 
 from .metrics import summarize
 from .paper import PAPER_FRICTION
 from .scenario import load_scenario
-from .schema import Config
+from .schema import Config, PlannerMode, SolverName
 from .simulation import simulate
 
 NINE = ("paper_v5_tau5", "paper_v5_tau4", "paper_v5_tau3", "paper_v6_w2.0", "paper_v6_w2.4", "paper_v6_w3.2",
@@ -30,9 +30,10 @@ RELAXED_5 = NINE[:3]
 SIX = NINE[3:6]
 SEVEN = NINE[6:]
 EXTREME = "paper_v7_tau1.4"
-PAPER_SOLVER = "paper_sqp"
+PAPER_SOLVER: SolverName = "paper_sqp"
 """The MPC solver that behaves like the paper's fmincon SQP under Table II."""
-RUNS: tuple[tuple[str, Optional[str]], ...] = (("combined", None), ("msf", None), ("mpc", PAPER_SOLVER), ("mpc", ""))
+RUNS: tuple[tuple[PlannerMode, Union[SolverName, Literal[""], None]], ...] = (
+    ("combined", None), ("msf", None), ("mpc", PAPER_SOLVER), ("mpc", ""))
 """(planner, MPC solver) of each scenario: None = the configured one; "" = the configured (fast) solver, labelled."""
 DURATION = 10.0
 """Simulated seconds after the obstacle appears: time to pass and return in every case."""
@@ -242,5 +243,9 @@ def update_document(path: Path, blocks: dict[str, str]) -> None:
         pattern = re.compile(rf"(<!-- BEGIN {re.escape(name)} -->\n).*?(<!-- END {re.escape(name)} -->)", re.S)
         if not pattern.search(text):
             raise ValueError(f"{path}: no '<!-- BEGIN {name} -->' ... '<!-- END {name} -->' block")
-        text = pattern.sub(lambda m, body=body: m.group(1) + body.rstrip("\n") + "\n" + m.group(2), text)
+
+        def fill(m: re.Match[str], body: str = body) -> str:
+            return m.group(1) + body.rstrip("\n") + "\n" + m.group(2)
+
+        text = pattern.sub(fill, text)
     path.write_text(text, encoding="utf-8")

@@ -25,6 +25,7 @@ import numpy as np
 import yaml
 
 from ..params import ParamError
+from ..schema import PlannerMode
 
 Sampling = Literal["grid", "lhs", "random"]
 
@@ -122,7 +123,7 @@ class Case:
     """Room beside the obstacle (m), :func:`moose.scenario.adhoc_scenario`."""
     mu: float
     """The road's friction."""
-    planner: str
+    planner: PlannerMode
     seed: int
     overrides: tuple[tuple[str, Any], ...] = ()
     """``--set`` parameters, sorted by key."""
