@@ -20,11 +20,14 @@ import json
 import math
 from collections import defaultdict
 from pathlib import Path
-from typing import Any, Optional, Sequence
+from typing import TYPE_CHECKING, Any, Optional, Sequence
 
 import numpy as np
 
 from ..params import ParamError
+
+if TYPE_CHECKING:
+    from matplotlib.typing import LineStyleType
 
 AXES = {
     "speed": ("input.speed_mps", "v (m/s)"), "tau": ("input.tau_s", "τ (s)"), "nu": ("input.nu", "ν (target)"),
@@ -44,7 +47,8 @@ COLOURS = {
     "stopped_short": "#8c564b", "incomplete": "#7f7f7f", "crashed": "#bcbd22", "error": "#000000",
     "timeout": "#e377c2",
 }
-PLANNER_STYLE = {"combined": ("tab:blue", "-"), "mpc": ("tab:red", "--"), "msf": ("tab:purple", ":")}
+PLANNER_STYLE: dict[str, tuple[str, LineStyleType]] = {
+    "combined": ("tab:blue", "-"), "mpc": ("tab:red", "--"), "msf": ("tab:purple", ":")}
 ADVANTAGE = (
     ("beats both", "#1f77b4"), ("beats MPC alone", "#17becf"), ("beats MSF alone", "#aec7e8"),
     ("all safe", "#d9f0d3"), ("combined worse", "#d62728"), ("none safe", "#bdbdbd"),
@@ -304,7 +308,7 @@ def envelope_map(cells: Cells, facets: Sequence[tuple], path: Path, paper: Seque
     return _save(fig, path)
 
 
-def _boundary(ax: Any, cells: Cells, cellmap: dict, colour: str, style: str) -> None:
+def _boundary(ax: Any, cells: Cells, cellmap: dict, colour: str, style: LineStyleType) -> None:
     """The edges between a planner's safe and unsafe cells (on a grid), or the 0.5 contour of the safe
     indicator over the samples (scattered points)."""
     if cells.grid:
@@ -373,7 +377,7 @@ def paper_points(cells: Cells) -> list[dict[str, Any]]:
     from ..paper import PAPER_EXPERIMENTS, PAPER_FRICTION
 
     mus = [mu for mu in cells.mus if abs(mu - PAPER_FRICTION) < 1e-12]
-    if (not mus or {cells.x, cells.y} != {"tau", "nu"} or any(n != "speed" for n in cells.facet_axes)
+    if (not mus or cells.y is None or {cells.x, cells.y} != {"tau", "nu"} or any(n != "speed" for n in cells.facet_axes)
             or cells.projected):
         return []
     points = []
@@ -481,7 +485,7 @@ def write_report(path: Path, rows: Sequence[dict[str, Any]], cells: Cells, figur
                      + "".join(f"<th>{esc(p)}</th>" for p in cells.planners) + "</tr>")
         for p in points:
             where = cells.facet_title(p["facet"])
-            if p["nearest"] is not None:
+            if p["nearest"] is not None and cells.y is not None:
                 where += f", {_column(cells.x)[1]} = {p['nearest'][0]:g}, {_column(cells.y)[1]} = {p['nearest'][1]:g}"
             parts.append(f"<tr><td>{esc(p['experiment'])}</td><td>{esc(where)}</td>"
                          + "".join(f"<td>{esc(p['outcomes'].get(pl, '-'))}</td>" for pl in cells.planners) + "</tr>")
