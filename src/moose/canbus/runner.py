@@ -272,7 +272,7 @@ class BridgeRunner:
                 deadline = now + period
 
 
-def open_log(path: str) -> can.Logger:
+def open_log(path: str) -> can.io.generic.MessageWriter:
     """python-can's Logger for ``path`` (its suffix picks the format); ParamError naming a bad path."""
     try:
         return can.Logger(str(path))
