@@ -119,13 +119,16 @@ def _field_type(node: tuple) -> tuple[Any, Any]:
 
     element, size = detail
     inner, inner_default = _field_type(element)
+    # cyclonedds' array[...] and sequence[...] are __class_getitem__ on plain classes (they build Annotated
+    # types), which mypy does not model
     if kind == Nodetype.ARRAY:
-        return idl.array[inner, size], (lambda f=inner_default, n=size: [f() for _ in range(n)])
-    return (idl.sequence[inner, size] if size else idl.sequence[inner]), list
+        return (idl.array[inner, size],  # type: ignore[misc]
+                lambda f=inner_default, n=size: [f() for _ in range(n)])
+    return (idl.sequence[inner, size] if size else idl.sequence[inner]), list  # type: ignore[misc]
 
 
 @lru_cache(maxsize=None)
-def message_class(type_name: str) -> type:
+def message_class(type_name: str) -> type[Any]:
     """The DDS dataclass of ``pkg/msg/Type``; raises :class:`UnknownMessageType` (a KeyError) naming it."""
     from cyclonedds.idl import IdlStruct
 
@@ -146,11 +149,12 @@ def message_class(type_name: str) -> type:
         namespace["__annotations__"] = annotations
         namespace.update(defaults)
 
-    cls = pytypes.new_class(type_name.split("/")[-1], (IdlStruct,), {"typename": dds_type_name(type_name)}, body)
+    cls: type[Any] = pytypes.new_class(type_name.split("/")[-1], (IdlStruct,), {"typename": dds_type_name(type_name)},
+                                       body)
     cls = dataclasses.dataclass(cls)
     for const_name, _kind, value in constants:
         setattr(cls, const_name, value)
-    cls.ros_type = type_name  # type: ignore[attr-defined]
+    cls.ros_type = type_name
     return cls
 
 
