@@ -296,3 +296,19 @@ def test_the_example_bags_read_completely() -> None:
         info = bag_info(bag, report)
         assert report.complete and info["losses"] == [] and info["messages"] == report.delivered
         assert report.recovered == ""
+
+
+def test_run_parameters_naming_an_unknown_planner_are_refused(tmp_path: Path) -> None:
+    """A bag whose recorded planner mode is not moose's is refused by name, not re-planned as another mode."""
+    bag = tmp_path / "bag"
+    shutil.copytree(EXTREME, bag)
+    metadata = bag / "metadata.yaml"
+    text = metadata.read_text(encoding="utf-8")
+    assert "moose.planner: combined\n" in text
+    metadata.write_text(text.replace("moose.planner: combined\n", "moose.planner: bogus\n"), encoding="utf-8")
+    with pytest.raises(BagError, match=r"moose.planner = 'bogus' is invalid: expected one of \['combined', 'mpc', "
+                                       r"'msf'\]"):
+        replan(bag, load_config(None))
+    out = run("bag", "replan", str(bag))
+    assert out.returncode == 2 and "moose: error:" in out.stderr and "moose.planner = 'bogus'" in out.stderr
+    assert "Traceback" not in out.stderr
