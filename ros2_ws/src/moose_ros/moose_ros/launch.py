@@ -32,7 +32,7 @@ from moose.metrics import summarize
 from moose.params import ParamError, read_ros_params
 from moose.planning import PlanningRecord
 from moose.scenario import Scenario
-from moose.schema import Config
+from moose.schema import Config, PlannerMode
 from moose.signals import Blend, Reference
 from moose.simulation import SimulationResult
 
@@ -98,7 +98,7 @@ class Monitor:
             if status.name == "vehicle_simulator" and status.message == "finished":
                 self.finished = True
 
-    def result(self, planner: str, seed: int) -> SimulationResult:
+    def result(self, planner: PlannerMode, seed: int) -> SimulationResult:
         rows = np.array(sorted(self.odom)) if self.odom else np.zeros((0, 7))  # no odometry: judged incomplete
         trace = {name: rows[:, i] for i, name in enumerate(("t", "x", "y", "theta", "vx", "vy", "delta"))}
         planning = [
@@ -106,7 +106,7 @@ class Monitor:
                            Reference(0.0, 0.0), float("nan"))
             for t, plan, threat in self.plans
         ]
-        return SimulationResult(self.scenario, planner, seed, trace, planning, self.first_threat,  # type: ignore[arg-type]
+        return SimulationResult(self.scenario, planner, seed, trace, planning, self.first_threat,
                                 self.config, self.scenario.lead_time + self.scenario.duration)
 
 
@@ -114,7 +114,7 @@ def _file_params(params_file: Optional[str], node: str) -> dict[str, Any]:
     return read_ros_params(params_file, node) if params_file else {}
 
 
-def planner_mode(planner: Optional[str], params_file: Optional[str]) -> str:
+def planner_mode(planner: Optional[PlannerMode], params_file: Optional[str]) -> PlannerMode:
     """``planner``, or the mode ``weight_fbl`` reads from the parameter file (``simulation.planner``)."""
     if params_file:
         check_parameter_file(params_file)
@@ -167,7 +167,7 @@ def launch(
     scenario: Scenario,
     params: dict[str, Any],
     graph: str = "full",
-    planner: Optional[str] = None,
+    planner: Optional[PlannerMode] = None,
     seed: int = 0,
     params_file: Optional[str] = None,
     rate: float = 1.0,
