@@ -498,7 +498,7 @@ def bag_info(path: str | Path, report: Optional[ReadReport] = None) -> dict[str,
         entry["last"] = m.timestamp_ns
         first = m.timestamp_ns if first is None else min(first, m.timestamp_ns)
         last = m.timestamp_ns if last is None else max(last, m.timestamp_ns)
-    duration = (last - first) * 1e-9 if first is not None else 0.0
+    duration = (last - first) * 1e-9 if first is not None and last is not None else 0.0
     topics = {}
     for topic, e in sorted(stats.items()):
         span = (e["last"] - e["first"]) * 1e-9

@@ -135,8 +135,8 @@ def record_result(result: Any, path: str | Path) -> dict[str, int]:
                                                            "finished" if last else "running", values))
     entries.sort(key=lambda e: (e[0], e[1]))
     try:
-        for stamp_ns, _order, topic, msg in entries:
-            writer.write(topic, TOPICS[topic].type, stamp_ns, bytes(msg.serialize()))
+        for stamp_ns, _order, name, msg in entries:
+            writer.write(name, TOPICS[name].type, stamp_ns, bytes(msg.serialize()))
     finally:
         writer.close()
     return dict(writer.counts)

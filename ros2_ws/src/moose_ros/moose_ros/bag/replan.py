@@ -89,6 +89,7 @@ def _replan(reader: BagReader, topics: list[str], step: Any, planner: str, v_des
         if m.topic == BLEND.name and estimate is not None:
             t = cv.time_of(msg)
             speed = scenario.desired_speed(detected) if scenario is not None else v_des
+            assert speed is not None  # without a scenario, v_des is set at the first estimate
             record = step.plan(t, estimate, threat, float(speed))
             blend, new_mpc = record.blend, record.mpc
             old_mpc = recorded_plans["mpc"].get(round(t, 6))
