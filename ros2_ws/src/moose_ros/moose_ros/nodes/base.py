@@ -28,7 +28,8 @@ class GraphNode:
             self.config = self.params.load_scenario().configure(self.config)
         # transient local: a late joiner (the simulator waiting for the graph) sees each node's last status
         self._diag = DIAGNOSTICS.publisher(rt)
-        self.level, self.message, self.values = OK, "running", {}
+        self.level, self.message = OK, "running"
+        self.values: dict[str, Any] = {}
         self.invalid: Counter[str] = Counter()
         """Invalid messages dropped, by topic."""
         self._invalid_reason = ""
