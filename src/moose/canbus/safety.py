@@ -52,7 +52,7 @@ import numbers
 from typing import Optional
 
 from moose.motion import MotionParams
-from moose.params import VEHICLE_LIMITS, ParamError, at_most, check
+from moose.params import VEHICLE_LIMITS, ParamError, VehicleParams, at_most, check
 
 from .ecu import ECU_TIMEOUT
 
@@ -119,11 +119,11 @@ class GuardParams:
         return self.brake_fraction * self.torque_max
 
     @classmethod
-    def from_vehicle(cls, vehicle: object, **changes: object) -> "GuardParams":
+    def from_vehicle(cls, vehicle: VehicleParams, **changes: float) -> "GuardParams":
         """The limits of ``vehicle`` (a :class:`~moose.params.VehicleParams`); other fields from ``changes`` or
         the defaults."""
         limits = {name: getattr(vehicle, limit_name) for name, limit_name in HARD_LIMIT.items()}
-        return cls(**limits, **changes)  # type: ignore[arg-type]
+        return cls(**limits, **changes)
 
 
 @dataclasses.dataclass(frozen=True)
