@@ -27,6 +27,7 @@ from moose.signals import (
     ImuSample,
     Obstacle,
     PlanResult,
+    PlanStatus,
     Reference,
     StateEstimate,
     Threat,
@@ -57,7 +58,7 @@ from .graph import (
     Topic,
 )
 
-STATUS_CODES = {"converged": 0, "capped": 1, "failed": 2, "over_budget": 3, "ok": 4, "idle": 5}
+STATUS_CODES: dict[PlanStatus, int] = {"converged": 0, "capped": 1, "failed": 2, "over_budget": 3, "ok": 4, "idle": 5}
 STATUS_NAMES = {code: name for name, code in STATUS_CODES.items()}
 
 
@@ -230,7 +231,7 @@ def plan_from_msg(msg: Any) -> PlanResult:
         raise InvalidMessage(f"PlannerOutput.cost = {msg.cost!r} is invalid: expected a number (1e300: none)")
     predicted = np.column_stack([values for _, values in columns]) if columns[0][1].size else np.zeros((0, 4))
     cost = msg.cost if msg.cost < 1e299 else math.inf
-    return PlanResult(np.column_stack([ax, ay]), STATUS_NAMES[int(msg.status)], int(msg.iterations),  # type: ignore[arg-type]
+    return PlanResult(np.column_stack([ax, ay]), STATUS_NAMES[int(msg.status)], int(msg.iterations),
                       msg.solve_time, cost, predicted)
 
 
