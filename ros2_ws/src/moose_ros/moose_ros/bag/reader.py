@@ -282,7 +282,9 @@ def _stream(file: Path) -> _Stream:
             counting = _Counting(handle)
             end = position
             try:
-                for record in StreamReader(counting, skip_magic=resumed, emit_chunks=True).records:  # type: ignore[arg-type]
+                # mcap annotates its input as a file object, but only calls read(), which _Counting has
+                mcap_reader = StreamReader(counting, skip_magic=resumed, emit_chunks=True)  # type: ignore[arg-type]
+                for record in mcap_reader.records:
                     if isinstance(record, Chunk):
                         records, unread, intact = _chunk(record)
                         for inner in records:
