@@ -1,15 +1,16 @@
 # Two entry points (see README): `make run` and `make test`. Both create the
 # virtual environment in .venv on first use and install everything the project needs.
+# `make lint` (ruff and mypy, configured in pyproject.toml) runs in CI before the tests.
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: run test bench map clean ros bags
+.PHONY: run test lint bench map clean ros bags
 
 $(STAMP): pyproject.toml ros2_ws/src/moose_ros/setup.py
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet -e '.[test,sweep,dask]' -e 'ros2_ws/src/moose_ros[parquet]'
+	$(BIN)/python -m pip install --quiet -e '.[test,sweep,dask,lint]' -e 'ros2_ws/src/moose_ros[parquet]'
 	touch $(STAMP)
 
 run: $(STAMP)
@@ -17,6 +18,10 @@ run: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest
+
+lint: $(STAMP)
+	$(BIN)/ruff check
+	$(BIN)/mypy
 
 bench: $(STAMP)
 	$(BIN)/python bench/bench_mpc.py

@@ -150,7 +150,6 @@ def main() -> None:
         return
     sys.path.insert(0, str(REPO / "tests"))
     from isolation import claim_domain
-
     from moose.params import ParamError
     from moose_ros.runtime import process
 

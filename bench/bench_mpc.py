@@ -15,13 +15,14 @@ earlier figures, the old kinematic bounds ±6 m/s² at μ = 0.3.
 
 Each geometry gives two sequences: one driven by the configured planner (projected Newton) and
 one by the paper baseline, so the warm starts are each one's own; every solver then gets the same
-problems and the same starting points, the configured cost and Table II's caps.  Printed per solver: median/p99 wall time of ``MpcPlanner.plan`` (solve and its
-Python wrapping), the mean cost reached, the share of problems where it is ≤ the paper baseline's
-(relative 1e-6) and at most Table II's 1e-3 above it, the worst difference, the share ending above
-the cost of its start, the baseline's median time over the solver's (one run), and the statuses.  For the baseline: its iterations and cost
-evaluations (cold and warm starts), and why it stopped.  SciPy's SLSQP with the same caps and
-finite differences counted (the stand-in of earlier figures) is printed as a cross-check of the
-baseline.  Timings on a shared machine: the load average is printed first.
+problems and the same starting points, the configured cost and Table II's caps.  Printed per
+solver: median/p99 wall time of ``MpcPlanner.plan`` (solve and its Python wrapping), the mean cost
+reached, the share of problems where it is ≤ the paper baseline's (relative 1e-6) and at most
+Table II's 1e-3 above it, the worst difference, the share ending above the cost of its start, the
+baseline's median time over the solver's (one run), and the statuses.  For the baseline: its
+iterations and cost evaluations (cold and warm starts), and why it stopped.  SciPy's SLSQP with
+the same caps and finite differences counted (the stand-in of earlier figures) is printed as a
+cross-check of the baseline.  Timings on a shared machine: the load average is printed first.
 Run: ``python bench/bench_mpc.py [--repeats R] [--full]``.
 """
 from __future__ import annotations
@@ -203,7 +204,7 @@ def run_grid(label: str, grid: PlanningGrid, repeats: int, full: bool) -> None:
             baseline_planner = planner
     slsqp_times: list[float] = []
     slsqp_costs = np.zeros(len(problems))
-    for r in range(repeats):
+    for _ in range(repeats):
         for i, inp in enumerate(problems):
             elapsed, u = slsqp(reference, inp, base.caps)
             slsqp_times.append(elapsed)

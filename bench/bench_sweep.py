@@ -65,7 +65,8 @@ def main() -> None:
           f"(real-time factor per worker {simulated / busy:.0f}x); overhead {big - busy / 2:.1f} s of the wall time")
     print(f"parallel efficiency, {args.efficiency_cases} cases, best of {args.repeats} (wall, start-up included): "
           f"1 worker {t1:.1f} s, 2 workers {t2:.1f} s -> {t1 / (2 * t2) * 100:.0f} %  (target >= 80 %); "
-          f"all runs: 1 worker {', '.join(f'{t:.1f}' for t in ones)} s, 2 workers {', '.join(f'{t:.1f}' for t in twos)} s")
+          f"all runs: 1 worker {', '.join(f'{t:.1f}' for t in ones)} s, "
+          f"2 workers {', '.join(f'{t:.1f}' for t in twos)} s")
     peaks: dict[str, float] = {}
     for row in rows:
         peaks[row["worker"]] = max(peaks.get(row["worker"], 0.0), row["worker_max_rss_mb"] or 0.0)

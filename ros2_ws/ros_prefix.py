@@ -61,7 +61,8 @@ BUILD_KEY_FILE = ".build-key"
 BOOTSTRAP_GUARD = "_ROS_WHEELS_BOOTSTRAP_COMPLETE"
 
 _MANYLINUX_PYTHON = re.compile(r"/opt/python/cp3\d+-cp3\d+t?/include/python3\.\d+t?")
-_MANYLINUX_NUMPY = re.compile(r"/opt/python/cp3\d+-cp3\d+t?/lib/python3\.\d+t?/site-packages/numpy/(?:_core|core)/include")
+_MANYLINUX_NUMPY = re.compile(
+    r"/opt/python/cp3\d+-cp3\d+t?/lib/python3\.\d+t?/site-packages/numpy/(?:_core|core)/include")
 _INCLUDE_DIRS = re.compile(r'INTERFACE_INCLUDE_DIRECTORIES\s+"([^"]*)"')
 
 _INFO = """

@@ -1,4 +1,5 @@
-"""Hypothesis strategies for hostile input to the CAN bridge: wild values, clock steps, valid-but-hostile configurations."""
+"""Hypothesis strategies for hostile input to the CAN bridge: wild values, clock steps, valid-but-hostile
+configurations."""
 from __future__ import annotations
 
 from hypothesis import strategies as st
@@ -9,8 +10,9 @@ from moose.schema import MinimumRiskParams
 
 DT = 0.01
 
-wild = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.floats(-1e3, 1e3), st.sampled_from([0.0, 0.3, -0.3]),
-                 st.integers(-10**400, 10**400), st.sampled_from([True, None, "0.1", 1e308]))
+wild = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.floats(-1e3, 1e3),
+                 st.sampled_from([0.0, 0.3, -0.3]), st.integers(-10**400, 10**400),
+                 st.sampled_from([True, None, "0.1", 1e308]))
 """Anything a command field or a measurement could be: NaN, ±inf, huge, integers beyond a float, non-numbers."""
 
 clock_step = st.one_of(st.just(DT), st.floats(0.0, 0.03), st.sampled_from([1.0, -5.0, 0.0, 1e9, -1e9, float("nan")]))

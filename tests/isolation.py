@@ -25,7 +25,7 @@ _held: list[IO[str]] = []
 
 def _lock(name: str) -> bool:
     LOCK_DIR.mkdir(parents=True, exist_ok=True)
-    handle = open(LOCK_DIR / name, "w", encoding="utf-8")
+    handle = open(LOCK_DIR / name, "w", encoding="utf-8")  # noqa: SIM115 - held (with its lock) until exit
     try:
         fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:

@@ -47,7 +47,8 @@ def prefix_problem(prefix: Path) -> tuple[str, str]:
                         "`make ros` installs rclpy from wheels and builds moose_msgs (README, 'ROS 2 client')")
     stamp = prefix / ros_prefix.INSTALL_KEY_FILE
     if not stamp.is_file() or stamp.read_text(encoding="utf-8").strip() != ros_prefix.install_key():
-        return "fail", f"{prefix} was installed from other requirements, another checkout or another Python: run `make ros`"
+        return "fail", (f"{prefix} was installed from other requirements, another checkout or another Python: "
+                        "run `make ros`")
     info = ros_prefix.query(prefix)
     built = prefix / "install" / ros_prefix.BUILD_KEY_FILE
     if not built.is_file() or built.read_text(encoding="utf-8").strip() != ros_prefix.build_key(info):

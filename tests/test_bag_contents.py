@@ -111,6 +111,6 @@ def test_birdseye_view_draws_a_shipped_bag_and_refuses_one_without_markers(tmp_p
     writer.close()
     with pytest.raises(BagError, match="/planning/markers"):
         plot_birdseye(odom_only, tmp_path / "none.png")
-    cli = subprocess.run([sys.executable, "-m", "moose.cli", "bag", "view", str(odom_only), "-o", str(tmp_path / "x.png")],
-                         capture_output=True, text=True, timeout=60)
+    cli = subprocess.run([sys.executable, "-m", "moose.cli", "bag", "view", str(odom_only),
+                          "-o", str(tmp_path / "x.png")], capture_output=True, text=True, timeout=60)
     assert cli.returncode == 2 and cli.stderr.startswith("moose: error:") and "Traceback" not in cli.stderr

@@ -15,7 +15,8 @@ from pathlib import Path
 
 import pytest
 from mcap.reader import make_reader
-from mcap.writer import CompressionType, Writer as McapWriter
+from mcap.writer import CompressionType
+from mcap.writer import Writer as McapWriter
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
@@ -117,7 +118,8 @@ def test_a_type_unknown_here_is_decoded_from_the_bags_own_definition(tmp_path: P
     assert played.returncode == 1 and f"played {TOTAL} messages" in played.stdout, played.stderr
     assert "1 message(s) on /lab/probe (lab_msgs/msg/Probe) skipped: not published" in played.stderr
     files = export(bag, tmp_path / "csv")
-    assert len(files) == len(BagReader(EXTREME).topics) + 1 and (tmp_path / "csv" / "lab__probe.csv").read_text().count("\n") == 2
+    assert len(files) == len(BagReader(EXTREME).topics) + 1
+    assert (tmp_path / "csv" / "lab__probe.csv").read_text().count("\n") == 2
 
 
 @pytest.mark.parametrize("kind", ["no definition", "corrupt"])
@@ -164,7 +166,8 @@ def test_a_bag_cut_inside_its_first_chunk_still_gives_the_complete_messages(tmp_
     messages = list(read_bag(bag, report=report))
     original = list(read_bag(EXTREME))
     assert len(messages) > 1000 and not report.complete
-    assert [(m.topic, m.timestamp_ns) for m in messages] == [(m.topic, m.timestamp_ns) for m in original[:len(messages)]]
+    assert ([(m.topic, m.timestamp_ns) for m in messages]
+            == [(m.topic, m.timestamp_ns) for m in original[:len(messages)]])
     if metadata:
         assert sum(report.missing.values()) == TOTAL - len(messages)
     assert report.lost_bytes > 0
@@ -203,7 +206,8 @@ def test_a_corrupt_chunk_is_reported_and_reading_goes_on_after_it(tmp_path: Path
     assert report.suspect == [f"chunk at byte {offset}"] and report.lost_bytes > 500_000
     assert sum(report.missing.values()) == (TOTAL - len(messages) if metadata else 0)
     out = run("bag", "info", str(bag))
-    assert out.returncode == 1 and "fails its checksum" in out.stderr and "byte(s) of records are unreadable" in out.stderr
+    assert out.returncode == 1 and "fails its checksum" in out.stderr
+    assert "byte(s) of records are unreadable" in out.stderr
 
 
 def test_damaged_files_give_errors_that_say_why(tmp_path: Path) -> None:
@@ -249,7 +253,7 @@ def wrong_state_type(path: Path) -> Path:
     """A bag whose /perception/state carries nav_msgs/msg/Odometry."""
     writer = BagWriter(path)
     odom = typestore().types["nav_msgs/msg/Odometry"]
-    for k, msg in enumerate(read_bag(EXTREME, ["/vehicle/odom", "/planning/blend"])):
+    for msg in read_bag(EXTREME, ["/vehicle/odom", "/planning/blend"]):
         topic = "/perception/state" if msg.topic == "/vehicle/odom" else msg.topic
         assert msg.topic != "/vehicle/odom" or isinstance(msg.msg, odom)
         writer.write(topic, msg.type_name, msg.timestamp_ns, typestore().serialize_cdr(msg.msg, msg.type_name))
@@ -263,7 +267,8 @@ def test_replan_on_a_bag_whose_state_topic_has_another_type_is_a_clear_error(tmp
                                        r"not 'moose_msgs/msg/StateEstimate'"):
         replan(bag, load_config(None))
     out = run("bag", "replan", str(bag))
-    assert out.returncode == 2 and "moose: error: topic '/perception/state'" in out.stderr and "Traceback" not in out.stderr
+    assert out.returncode == 2 and "moose: error: topic '/perception/state'" in out.stderr
+    assert "Traceback" not in out.stderr
     out = run("bag", "play", str(bag), "--rate", "100")  # nor is it published into the graph under that name
     assert out.returncode == 2 and "carries 'nav_msgs/msg/Odometry'" in out.stderr
 
@@ -291,3 +296,19 @@ def test_the_example_bags_read_completely() -> None:
         info = bag_info(bag, report)
         assert report.complete and info["losses"] == [] and info["messages"] == report.delivered
         assert report.recovered == ""
+
+
+def test_run_parameters_naming_an_unknown_planner_are_refused(tmp_path: Path) -> None:
+    """A bag whose recorded planner mode is not moose's is refused by name, not re-planned as another mode."""
+    bag = tmp_path / "bag"
+    shutil.copytree(EXTREME, bag)
+    metadata = bag / "metadata.yaml"
+    text = metadata.read_text(encoding="utf-8")
+    assert "moose.planner: combined\n" in text
+    metadata.write_text(text.replace("moose.planner: combined\n", "moose.planner: bogus\n"), encoding="utf-8")
+    with pytest.raises(BagError, match=r"moose.planner = 'bogus' is invalid: expected one of \['combined', 'mpc', "
+                                       r"'msf'\]"):
+        replan(bag, load_config(None))
+    out = run("bag", "replan", str(bag))
+    assert out.returncode == 2 and "moose: error:" in out.stderr and "moose.planner = 'bogus'" in out.stderr
+    assert "Traceback" not in out.stderr

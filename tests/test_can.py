@@ -1,11 +1,10 @@
 """CAN layer: DBC round trip, bus load, CRC, malformed frames, command guard limits and timeout, bridge ↔ ECU."""
 from __future__ import annotations
 
+from typing import Callable
 
 import can
 import numpy as np
-from typing import Callable
-
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -138,7 +137,8 @@ def test_bridge_and_ecu_over_a_virtual_bus() -> None:
         u = ecu.plant_input(0.39)
         assert u[0] == pytest.approx(0.2, abs=1e-3) and u[1] == pytest.approx(80.0, abs=0.01)  # torque ramped up
         gps = [s for s in samples if isinstance(s, GpsSample)]
-        assert len(gps) == 1 and gps[0].x == pytest.approx(12.345) and gps[0].t - gps[0].t_measured == pytest.approx(0.2)
+        assert len(gps) == 1 and gps[0].x == pytest.approx(12.345)
+        assert gps[0].t - gps[0].t_measured == pytest.approx(0.2)
         assert sum(isinstance(s, ImuSample) for s in samples) == 40
         assert bridge.codec.stats.dropped == 0 and ecu.codec.stats.dropped == 0
         assert np.allclose(ecu.plant_input(1.0), 0.0)  # the ECU's own timeout

@@ -8,6 +8,8 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
+from can_hostile import clock_step, hostile_guard_params
+from can_hostile import wild as wild_value
 from moose.canbus.bridge import BridgeCore
 from moose.canbus.bus import BusLink, open_bus
 from moose.canbus.codec import PROTECTED, Codec, command_checksum, load_database
@@ -17,9 +19,6 @@ from moose.canbus.safety import Command, GuardParams, GuardState
 from moose.params import ParamError
 from moose.signals import EpsSample, GpsSample, ImuSample, WheelSpeedSample
 
-from can_hostile import clock_step, hostile_guard_params
-from can_hostile import wild as wild_value
-
 DB = load_database()
 GUARD = GuardParams()
 COMMAND_IDS = {DB.get_message_by_name(n).frame_id for n in PROTECTED}
@@ -27,7 +26,8 @@ COMMAND_IDS = {DB.get_message_by_name(n).frame_id for n in PROTECTED}
 
 def is_valid_command_by_chance(frame: can.Message) -> bool:
     data = bytes(frame.data)
-    return frame.arbitration_id in COMMAND_IDS and len(data) == 8 and command_checksum(frame.arbitration_id, data) == data[7]
+    return (frame.arbitration_id in COMMAND_IDS and len(data) == 8
+            and command_checksum(frame.arbitration_id, data) == data[7])
 
 
 garbage = st.builds(
@@ -79,10 +79,12 @@ def test_random_and_malformed_frames_never_crash_the_bridge_nor_reach_the_ecu(st
         frames = bridge.tick(t)
         values = decoded_commands(frames)
         steer, torque = values["CMD_STEER"], values["CMD_TORQUE"]
-        assert abs(steer["SteerAngleCmd"]) <= GUARD.delta_max + 1e-4 and abs(steer["SteerRateCmd"]) <= GUARD.steer_rate_limit + 1e-3
+        assert abs(steer["SteerAngleCmd"]) <= GUARD.delta_max + 1e-4
+        assert abs(steer["SteerRateCmd"]) <= GUARD.steer_rate_limit + 1e-3
         assert abs(torque["TorqueRL"]) <= GUARD.torque_max + 0.01 and abs(torque["TorqueRR"]) <= GUARD.torque_max + 0.01
         if sent:  # rate limits between consecutive frames (one LSB of quantisation each side)
-            assert abs(steer["SteerAngleCmd"] - sent["CMD_STEER"]["SteerAngleCmd"]) <= GUARD.steer_rate_limit * 0.01 + 2e-4
+            assert (abs(steer["SteerAngleCmd"] - sent["CMD_STEER"]["SteerAngleCmd"])
+                    <= GUARD.steer_rate_limit * 0.01 + 2e-4)
             for wheel in ("TorqueRL", "TorqueRR"):
                 assert abs(torque[wheel] - sent["CMD_TORQUE"][wheel]) <= GUARD.torque_rate_limit * 0.01 + 0.02
         sent.update(values)
@@ -211,7 +213,8 @@ def test_ecu_saturates_sensors_and_skips_non_finite_samples() -> None:
     frames = ecu.frames([ImuSample(0.0, 45.0, -45.0, 3.5), EpsSample(0.0, math.nan)], 0.0)
     assert len(frames) == 1 and ecu.unsendable == 1
     decoded = Codec(DB).decode(frames[0])
-    assert decoded is not None and decoded[1]["AccelX"] == pytest.approx(30.0) and decoded[1]["YawRate"] == pytest.approx(3.0)
+    assert decoded is not None
+    assert decoded[1]["AccelX"] == pytest.approx(30.0) and decoded[1]["YawRate"] == pytest.approx(3.0)
     with pytest.raises(TypeError, match="has no frame"):
         ecu.encode(object(), 0.0)
     with pytest.raises(ValueError, match="timeout"):
@@ -249,7 +252,8 @@ def test_a_node_does_not_decode_frames_it_transmits_itself() -> None:
         ecu.on_frame(status, 0.0)
     assert ecu.codec.stats.own_id == 2 and ecu.codec.stats.bad_counter == 0
     assert bridge.on_frame(status, 0.0) is not None  # the bridge receives it
-    heartbeat = Codec(DB).encode("BRIDGE_HEARTBEAT", {s.name: 0.0 for s in DB.get_message_by_name("BRIDGE_HEARTBEAT").signals
+    heartbeat = Codec(DB).encode("BRIDGE_HEARTBEAT", {s.name: 0.0
+                                                      for s in DB.get_message_by_name("BRIDGE_HEARTBEAT").signals
                                                       if s.name != "Counter"})
     assert bridge.on_frame(heartbeat, 0.0) is None and bridge.codec.stats.own_id == 1
 
@@ -272,7 +276,8 @@ def decode_all(frames: list[can.Message], rx: Codec) -> dict[str, dict[str, floa
 @settings(max_examples=150, deadline=None)
 @given(hostile_guard_params(),
        st.lists(st.tuples(clock_step, st.lists(garbage, max_size=30),
-                          st.one_of(st.none(), st.tuples(wild_value, wild_value, wild_value, wild_value)), st.booleans()),
+                          st.one_of(st.none(), st.tuples(wild_value, wild_value, wild_value, wild_value)),
+                        st.booleans()),
                 min_size=1, max_size=60))
 def test_nothing_received_commanded_or_configured_raises_out_of_the_tick(params: GuardParams, steps: list) -> None:
     bridge, rx = BridgeCore(params), Codec(DB)
@@ -302,7 +307,8 @@ def test_nothing_received_commanded_or_configured_raises_out_of_the_tick(params:
         for name, limit in limits.items():
             assert abs(now[name]) <= limit + LSB[name], name
         if previous is not None:  # one command period's step at the limit rate, one LSB of rounding each side
-            steps_ok = {"SteerAngleCmd": params.steer_rate_limit * period, "TorqueRL": params.torque_rate_limit * period,
+            steps_ok = {"SteerAngleCmd": params.steer_rate_limit * period,
+                        "TorqueRL": params.torque_rate_limit * period,
                         "TorqueRR": params.torque_rate_limit * period}
             for name, bound in steps_ok.items():
                 assert abs(now[name] - previous[name]) <= bound + 2 * LSB[name], name
@@ -390,4 +396,5 @@ def test_lost_commands_lead_the_frames_into_the_minimum_risk_maneuver() -> None:
     assert steer[first]["SteerRateCmd"] < 0.0 and steer[first]["SteerAngleCmd"] < steer[0.2]["SteerAngleCmd"]
     assert all(steer[t]["SteerAngleCmd"] == pytest.approx(0.0, abs=1e-4) for t in steer if t >= first + 0.1)
     assert torque[first] == pytest.approx(130.0) and min(torque.values()) == pytest.approx(-GUARD.brake_torque)
-    assert frames_by_t[0.3]["BRIDGE_HEARTBEAT"]["State"] == 1 and frames_by_t[0.3]["BRIDGE_STATUS"]["CommandTimeout"] == 1
+    assert frames_by_t[0.3]["BRIDGE_HEARTBEAT"]["State"] == 1
+    assert frames_by_t[0.3]["BRIDGE_STATUS"]["CommandTimeout"] == 1

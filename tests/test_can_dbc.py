@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from moose.canbus.bridge import LIMIT_SIGNALS, BridgeCore, check_limits_encodable
 from moose.canbus.busload import frame_loads, worst_case_bus_load, worst_case_frame_bits
 from moose.canbus.codec import (
     PROTECTED,
@@ -15,7 +16,6 @@ from moose.canbus.codec import (
     crc8_j1850,
     load_database,
 )
-from moose.canbus.bridge import LIMIT_SIGNALS, BridgeCore, check_limits_encodable
 from moose.canbus.safety import HARD_LIMIT, GuardParams
 from moose.params import VEHICLE_LIMITS, ParamError, VehicleParams
 from moose.resources import DBC_FILE
@@ -28,7 +28,8 @@ CYCLE_MS = {"CMD_STEER": 10, "CMD_TORQUE": 10, "EPS_STATUS": 10, "WHEEL_SPEEDS":
 """The brief's cycle times."""
 
 MUST_COVER = {  # signal: the magnitude it must represent (the vehicle's hard limits, sensor ranges of the brief)
-    ("CMD_STEER", "SteerAngleCmd"): VEHICLE_LIMITS.delta_max, ("CMD_STEER", "SteerRateCmd"): VEHICLE_LIMITS.delta_rate_max,
+    ("CMD_STEER", "SteerAngleCmd"): VEHICLE_LIMITS.delta_max,
+    ("CMD_STEER", "SteerRateCmd"): VEHICLE_LIMITS.delta_rate_max,
     ("CMD_TORQUE", "TorqueRL"): VEHICLE_LIMITS.T_max, ("CMD_TORQUE", "TorqueRR"): VEHICLE_LIMITS.T_max,
     ("EPS_STATUS", "SteerAngle"): VEHICLE_LIMITS.delta_max,
     ("WHEEL_SPEEDS", "OmegaRL"): 20.0 / VEHICLE.r, ("WHEEL_SPEEDS", "OmegaRR"): 20.0 / VEHICLE.r,
@@ -71,7 +72,8 @@ def test_every_hard_limit_of_the_vehicle_is_encodable_in_the_command_frames() ->
     tx = Codec(DB)
     for sign in (-1.0, 1.0):
         for (frame, signal), limit_name in LIMIT_SIGNALS.items():
-            values = {s.name: 0.0 for s in DB.get_message_by_name(frame).signals if s.name not in ("Counter", "Checksum")}
+            values = {s.name: 0.0 for s in DB.get_message_by_name(frame).signals
+                      if s.name not in ("Counter", "Checksum")}
             values[signal] = sign * getattr(hard, limit_name)
             decoded = rx.decode(tx.encode(frame, values))
             assert decoded is not None and decoded[1][signal] == pytest.approx(values[signal], abs=1e-9)
@@ -84,7 +86,7 @@ def test_every_hard_limit_of_the_vehicle_is_encodable_in_the_command_frames() ->
 ])
 def test_a_dbc_that_cannot_carry_a_limit_is_refused_at_start_up(signal: str, text: str, limit: str) -> None:
     original = DBC_FILE.read_text()
-    line = next(l for l in original.splitlines() if f"SG_ {signal} :" in l)
+    line = next(row for row in original.splitlines() if f"SG_ {signal} :" in row)
     narrowed = line[:line.index("(")] + text + " " + line[line.index('"'):]
     db = cantools.database.load_string(original.replace(line, narrowed), "dbc")
     with pytest.raises(ParamError, match=rf"{limit} is invalid: CMD_\w+\.{signal} \(range .*\) cannot carry"):
@@ -123,7 +125,8 @@ def test_out_of_range_values_are_refused_or_saturated() -> None:
     with pytest.raises(ValueError, match="IMU.AccelX = nan"):
         codec.encode("IMU", {"YawRate": 0.0, "AccelX": float("nan"), "AccelY": 0.0}, saturate=True)
     decoded = Codec(DB).decode(codec.encode("IMU", {"YawRate": -99.0, "AccelX": 99.0, "AccelY": 0.0}, saturate=True))
-    assert decoded is not None and decoded[1]["YawRate"] == pytest.approx(-3.0) and decoded[1]["AccelX"] == pytest.approx(30.0)
+    assert decoded is not None
+    assert decoded[1]["YawRate"] == pytest.approx(-3.0) and decoded[1]["AccelX"] == pytest.approx(30.0)
 
 
 def test_crc8_sae_j1850_check_values() -> None:

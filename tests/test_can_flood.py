@@ -33,9 +33,8 @@ import pytest
 from can.interfaces.udp_multicast.bus import SO_TIMESTAMPNS
 from can.interfaces.udp_multicast.utils import unpack_message
 
-from moose.canbus.codec import Codec
-
 from isolation import claim_udp_port
+from moose.canbus.codec import Codec
 
 FLOOD_RATE = 100_000
 """Junk frames per second the flooder aims at."""
@@ -75,7 +74,8 @@ import can
 from can.interfaces.udp_multicast.utils import pack_message
 from moose.canbus.codec import Codec
 
-group, port, rate, duration, malformed = sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), float(sys.argv[4]), int(sys.argv[5])
+group, port = sys.argv[1], int(sys.argv[2])
+rate, duration, malformed = float(sys.argv[3]), float(sys.argv[4]), int(sys.argv[5])
 bridge_ids = {0x100, 0x101, 0x300, 0x301}
 rng = random.Random(1)
 junk = []
@@ -190,7 +190,8 @@ def start(script: str, *args: object, env: Optional[dict[str, str]] = None) -> s
     return child
 
 
-def flood_run(bridge_script: str = BRIDGE, bridge_env: Optional[dict[str, str]] = None, malformed: int = 2) -> dict[str, Any]:
+def flood_run(bridge_script: str = BRIDGE, bridge_env: Optional[dict[str, str]] = None,
+              malformed: int = 2) -> dict[str, Any]:
     """Bridge and flooder processes on a fresh bus, the reader here; what each saw."""
     group, port = unique_group(), claim_udp_port()
     reader = Reader(group, port)
@@ -257,7 +258,8 @@ def test_the_heartbeat_says_commanding_only_while_commands_go_out(flood: dict[st
     frames = flood["reader"].frames
     steer = [t for t, n, _ in frames if n == "CMD_STEER"]
     beats = [(t, v["State"]) for t, n, v in frames if n == "BRIDGE_HEARTBEAT"]
-    assert len(beats) >= 0.9 * (FLOOD_S + 2 * QUIET_S) / 0.1 and sum(state == 0 for _, state in beats) >= len(beats) // 2
+    assert len(beats) >= 0.9 * (FLOOD_S + 2 * QUIET_S) / 0.1
+    assert sum(state == 0 for _, state in beats) >= len(beats) // 2
     for t, state in beats:
         if state == 0:  # commanding: no command gap over the ECU timeout in the status period before it
             window = [s for s in steer if t - 0.1 <= s <= t]

@@ -1,4 +1,5 @@
-"""The bridge's command guard: the vehicle's limits, clock steps, hostile input and configuration, the minimum-risk maneuver."""
+"""The bridge's command guard: the vehicle's limits, clock steps, hostile input and configuration, the minimum-risk
+maneuver."""
 from __future__ import annotations
 
 import math
@@ -7,11 +8,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from can_hostile import clock_step, hostile_guard_params, wild
 from moose.canbus.safety import Command, CommandGuard, GuardParams, GuardState
 from moose.params import VEHICLE_LIMITS, ParamError, VehicleParams
 from moose.schema import MinimumRiskParams
-
-from can_hostile import clock_step, hostile_guard_params, wild
 
 P = GuardParams()
 DT = 0.01
@@ -38,19 +38,22 @@ def test_limits_are_the_vehicles_hard_limits_and_configuration_can_only_tighten_
         VEHICLE_LIMITS.delta_max, VEHICLE_LIMITS.delta_rate_max, VEHICLE_LIMITS.T_max, VEHICLE_LIMITS.torque_rate_max)
     tight = VehicleParams(delta_max=0.2, delta_rate_max=0.5, T_max=150.0, torque_rate_max=1000.0)
     g = GuardParams.from_vehicle(tight, timeout=0.03)
-    assert (g.delta_max, g.steer_rate_limit, g.torque_max, g.torque_rate_limit, g.timeout) == (0.2, 0.5, 150.0, 1000.0, 0.03)
+    assert ((g.delta_max, g.steer_rate_limit, g.torque_max, g.torque_rate_limit, g.timeout)
+            == (0.2, 0.5, 150.0, 1000.0, 0.03))
     assert g.brake_torque == 150.0  # the braking torque follows the tightened T_max
     # looser than the vehicle: refused at start-up, naming the field and the value
     for field, value in (("delta_max", 0.5), ("delta_max", 3.0), ("torque_max", 300.0), ("steer_rate_limit", 2.0),
                          ("torque_rate_limit", 5000.0)):
-        with pytest.raises(ParamError, match=rf"{field} = {value!r} is invalid: expected at most the vehicle's hard limit"):
+        with pytest.raises(ParamError,
+                           match=rf"{field} = {value!r} is invalid: expected at most the vehicle's hard limit"):
             GuardParams(**{field: value})
     with pytest.raises(ParamError, match="timeout = 0.5 is invalid"):
         GuardParams(timeout=0.5)  # longer than the vehicle ECUs' own 50 ms would keep a dead controller's command alive
     for field, value in (("timeout", 0.0), ("delta_max", float("nan"))):
         with pytest.raises(ParamError, match=rf"{field} = "):
             GuardParams(**{field: value})
-    for field, value in (("brake_gain", float("inf")), ("stop_time", -1.0), ("brake_fraction", 1.5), ("eps_gain", True)):
+    for field, value in (("brake_gain", float("inf")), ("stop_time", -1.0), ("brake_fraction", 1.5),
+                         ("eps_gain", True)):
         with pytest.raises(ParamError, match=rf"{field} = "):  # the maneuver's own group (moose.minimum_risk)
             MinimumRiskParams(**{field: value})
     with pytest.raises(ParamError, match="timeout = 0.01 is invalid: expected at least one command period"):
@@ -135,9 +138,11 @@ def hostile_params(draw: st.DrawFn) -> tuple[GuardParams, float]:
 
 @settings(max_examples=400, deadline=None)
 @given(hostile_params(),
-       st.lists(st.tuples(clock_step, st.one_of(st.none(), st.tuples(wild, wild, wild, wild)), st.one_of(st.none(), wild),
-                          st.one_of(st.none(), st.tuples(wild, wild))), min_size=1, max_size=80))
-def test_any_input_any_clock_any_valid_config_stays_inside_the_limits_and_times_out(config: tuple, stream: list) -> None:
+       st.lists(st.tuples(clock_step, st.one_of(st.none(), st.tuples(wild, wild, wild, wild)),
+                          st.one_of(st.none(), wild), st.one_of(st.none(), st.tuples(wild, wild))),
+                min_size=1, max_size=80))
+def test_any_input_any_clock_any_valid_config_stays_inside_the_limits_and_times_out(config: tuple,
+                                                                                     stream: list) -> None:
     p, period = config
     guard = CommandGuard(p, period)
     t, previous = 0.0, guard.output(0.0)
@@ -201,7 +206,8 @@ def test_an_invalid_command_starts_the_minimum_risk_maneuver_at_once_and_a_valid
     assert before == Command(0.1, 0.5, 100.0, 100.0)
     guard.receive(Command(0.1, float("nan"), 100.0, 100.0))
     out = guard.output(0.30)
-    assert guard.state == GuardState.MINIMUM_RISK and guard.invalid == 1 and guard.pop_invalid() and not guard.pop_invalid()
+    assert guard.state == GuardState.MINIMUM_RISK and guard.invalid == 1
+    assert guard.pop_invalid() and not guard.pop_invalid()
     assert out.steering_angle == pytest.approx(0.09) and out.torque_rl == pytest.approx(80.0)  # back towards 0
     guard.output(0.31)
     guard.receive(Command(-0.2, 0.5, 100.0, 100.0))
@@ -266,7 +272,8 @@ def test_lost_commands_steer_back_to_straight_and_brake_to_a_stop() -> None:
     assert maneuver[-1].steering_angle == pytest.approx(0.0, abs=1e-12) and abs(maneuver[-1].steering_rate) < 0.05
     stopped = states.index(GuardState.STOPPED)
     assert 2.4 < stopped * DT < 3.5  # 23 rad/s at T_brake (about 2.4 s), the slowing under k_ω, 0.2 s still
-    assert abs(omega) < P.maneuver.stop_speed and outs[stopped + 2][1].torque_rl == 0.0  # released, ramped to 0 at Ṫ_max
+    assert abs(omega) < P.maneuver.stop_speed
+    assert outs[stopped + 2][1].torque_rl == 0.0  # released, ramped to 0 at Ṫ_max
     assert all(s == GuardState.STOPPED for s in states[stopped:])
 
 

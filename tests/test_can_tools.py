@@ -1,4 +1,5 @@
-"""`moose can` tools on hostile input: corrupt and unknown logs, bad ports and interfaces give a ParamError, never a traceback."""
+"""`moose can` tools on hostile input: corrupt and unknown logs, bad ports and interfaces give a ParamError, never a
+traceback."""
 from __future__ import annotations
 
 import gzip
@@ -13,7 +14,6 @@ from moose.canbus.bus import BusParams, open_bus
 from moose.canbus.codec import Codec
 from moose.canbus.tools import dump, open_tool_bus, read_log, replay
 from moose.params import ParamError
-
 
 CHANNEL = f"moose-test-tools-{os.getpid()}"
 

@@ -3,8 +3,9 @@
 A unique IPv4 group (239.192.0.0/14, organisation-local scope) and UDP port per test run.
 The ECU process runs the real plant and sensors behind ``VehicleEcu``; this process runs
 the bridge as the node does — a ``BridgeRunner`` with its sender thread, commands forwarded
-and samples taken every 10 ms — with a feedback EPS law closing the steering loop over the bus.  When raw packet sockets are allowed, every interface is watched during the run:
-the frames must appear on ``lo`` and nothing of the group (data or IGMP) anywhere else.
+and samples taken every 10 ms — with a feedback EPS law closing the steering loop over the
+bus.  When raw packet sockets are allowed, every interface is watched during the run: the
+frames must appear on ``lo`` and nothing of the group (data or IGMP) anywhere else.
 """
 from __future__ import annotations
 
@@ -224,7 +225,8 @@ def test_bridge_and_ecu_emulator_in_two_processes_over_loopback_multicast(exchan
     assert ecu["vx"] > 5.0  # driven by the torque commands
     assert ecu["u_end"] == [0.0, 0.0, 0.0]  # the ECU's own timeout once the bridge fell silent
     assert ecu["t_end"] < 5.0
-    count = {kind: sum(isinstance(r, kind) for r in records) for kind in (ImuSample, WheelSpeedSample, EpsSample, GpsSample)}
+    count = {kind: sum(isinstance(r, kind) for r in records)
+             for kind in (ImuSample, WheelSpeedSample, EpsSample, GpsSample)}
     assert count[ImuSample] >= 100 and count[WheelSpeedSample] >= 100 and count[EpsSample] >= 100
     assert count[GpsSample] >= 1
     wheels = [r for r in records if isinstance(r, WheelSpeedSample)]

@@ -133,7 +133,8 @@ def test_simulate_prints_its_verdict_and_exits_with_it(tmp_path: Path) -> None:
     summary = strict_json(tmp_path / "main" / "summary.json")
     assert main.returncode == 0 and summary["outcome"] == "clear", main.stderr
     assert f"outcome         CLEAR: {summary['reason']}" in main.stdout and "collision-free" not in main.stdout
-    assert (tmp_path / "main" / "figure.png").stat().st_size > 0 and (tmp_path / "main" / "bag" / "metadata.yaml").is_file()
+    assert (tmp_path / "main" / "figure.png").stat().st_size > 0
+    assert (tmp_path / "main" / "bag" / "metadata.yaml").is_file()
     hit = moose("simulate", "--speed", "7", "--tau", "0.3", "--obstacle-half-width", "2", "--no-bag",
                 "--json", str(tmp_path / "hit.json"))
     summary = strict_json(tmp_path / "hit.json")

@@ -9,8 +9,8 @@ from moose.detector import ObstacleDetector
 from moose.maneuver import MaxSteeringTable
 from moose.paper import PAPER_FRICTION
 from moose.params import ParamError, VehicleParams
-from moose.signals import Obstacle, StateEstimate
 from moose.schema import DetectorParams, ManeuverParams
+from moose.signals import Obstacle, StateEstimate
 
 VEHICLE = VehicleParams(mu=PAPER_FRICTION)  # the friction of the paper's nu
 
@@ -113,7 +113,8 @@ def test_nearest_zone_in_the_path_is_reported(table: MaxSteeringTable) -> None:
 
 
 def test_standstill_is_no_collision_course(table: MaxSteeringTable) -> None:
-    threat = ObstacleDetector(DetectorParams(), table).update(0.0, est(0.0, 0.0, vx=0.0), [Obstacle(20.0, 22.0, -1.0, 1.0)])
+    threat = ObstacleDetector(DetectorParams(), table).update(0.0, est(0.0, 0.0, vx=0.0),
+                                                              [Obstacle(20.0, 22.0, -1.0, 1.0)])
     assert threat is not None and threat.tau == math.inf and threat.w == 1.0 and threat.nu == 0.0
 
 

@@ -16,7 +16,8 @@ from isolation import claim_domain
 from moose.params import ParamError
 from moose_ros.runtime.discovery import Discovery, names_interface
 
-LO_XML = '<CycloneDDS><Domain><General><Interfaces><NetworkInterface name="lo"/></Interfaces></General></Domain></CycloneDDS>'
+LO_XML = ('<CycloneDDS><Domain><General><Interfaces><NetworkInterface name="lo"/></Interfaces></General></Domain>'
+          '</CycloneDDS>')
 
 
 def parts(config: str) -> list[ET.Element]:
@@ -36,7 +37,8 @@ def test_unset_means_this_host_bound_to_loopback() -> None:
 
 
 def test_each_range_maps_like_rmw_cyclonedds() -> None:
-    subnet = Discovery.from_environ({"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET", "ROS_STATIC_PEERS": "10.0.0.7;car2.lan"})
+    subnet = Discovery.from_environ({"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET",
+                                     "ROS_STATIC_PEERS": "10.0.0.7;car2.lan"})
     root = parts(subnet.cyclone_config())[0]
     assert list(root.iter("NetworkInterface")) == [] and root.find("Domain/General") is None  # multicast, any interface
     assert [p.get("address") for p in root.iter("Peer")] == ["10.0.0.7", "car2.lan"]
@@ -58,7 +60,8 @@ def test_deprecated_localhost_only_prevails_and_drops_the_peers() -> None:
     d = Discovery.from_environ({"ROS_LOCALHOST_ONLY": "1", "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET",
                                 "ROS_STATIC_PEERS": "10.0.0.7"})
     assert d.range == "LOCALHOST" and d.static_peers == () and d.loopback_only and d.ignored_peers == ("10.0.0.7",)
-    assert Discovery.from_environ({"ROS_LOCALHOST_ONLY": "0", "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}).range == "SUBNET"
+    environ = {"ROS_LOCALHOST_ONLY": "0", "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}
+    assert Discovery.from_environ(environ).range == "SUBNET"
 
 
 @pytest.mark.parametrize(("env", "match"), [

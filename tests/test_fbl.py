@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from moose.fbl import FeedbackLinearization
-from moose.schema import FblParams
 from moose.params import VehicleParams
+from moose.schema import FblParams
 from moose.signals import StateEstimate
 from moose.tire import peak_slip
 from moose.vehicle import DELTA, GAMMA, THETA, VX, VY, VehiclePlant, initial_state
@@ -29,7 +29,8 @@ def global_acceleration(delta: float, vy: float, gamma: float, theta: float) -> 
     return np.array([c * ax - s * ay, s * ax + c * ay]), estimate
 
 
-@pytest.mark.parametrize("delta, vy, gamma, theta", [(0.03, 0.1, 0.1, 0.2), (-0.05, -0.2, -0.2, -0.4), (0.08, 0.0, 0.3, 1.0)])
+@pytest.mark.parametrize("delta, vy, gamma, theta",
+                         [(0.03, 0.1, 0.1, 0.2), (-0.05, -0.2, -0.2, -0.4), (0.08, 0.0, 0.3, 1.0)])
 def test_round_trip_recovers_the_steering_angle(delta: float, vy: float, gamma: float, theta: float) -> None:
     accel, estimate = global_acceleration(delta, vy, gamma, theta)
     fbl = FeedbackLinearization(FblParams(), P, 0.2)

@@ -25,7 +25,8 @@ from moose_ros.runtime import DdsNode
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "ros2_ws" / "src" / "moose_ros"
-TOPIC_LITERAL = re.compile(r"""["'](/(?:clock|diagnostics|tf|tf_static|vehicle/\w+|perception/\w+|planning/\w+|control/\w+))["']""")
+TOPIC_LITERAL = re.compile(
+    r"""["'](/(?:clock|diagnostics|tf|tf_static|vehicle/\w+|perception/\w+|planning/\w+|control/\w+))["']""")
 
 
 def test_topic_names_are_written_once_in_the_package() -> None:
@@ -108,7 +109,8 @@ def test_ros2_launch_file_starts_what_moose_launch_starts(with_simulator: bool, 
         assert given["use_sim_time"] is (with_simulator and name != "vehicle_simulator")
         assert given["vehicle.mu"] == mu and given["simulation.planner"] == planner  # one road, one mode
     if with_simulator:  # it starts the clock once every other node of the graph has announced itself
-        assert started["vehicle"]["vehicle_simulator"][0]["wait_for"] == [n for n in expected if n != "vehicle_simulator"]
+        assert (started["vehicle"]["vehicle_simulator"][0]["wait_for"]
+                == [n for n in expected if n != "vehicle_simulator"])
     params_file = str(ROOT / "config" / "moose.yaml")
     with_file = graph_launch.node_parameters("all", with_simulator, scenario, planner, params_file)
     assert all(p[0] == params_file and p[1] == started["all"][n][0] for n, p in with_file.items())
@@ -138,12 +140,14 @@ def test_setup_entry_points_and_compose_follow_the_contract() -> None:
 
 def test_docs_topic_table_is_the_contracts() -> None:
     design = (ROOT / "docs" / "design.md").read_text(encoding="utf-8")
-    assert topic_table() in design, "regenerate with: python -c 'from moose_ros.graph import topic_table; print(topic_table())'"
+    assert topic_table() in design, \
+        "regenerate with: python -c 'from moose_ros.graph import topic_table; print(topic_table())'"
 
 
 def test_can_defaults_have_one_definition() -> None:
     """The multicast group and port are moose.canbus.bus's: no other module writes them."""
-    for path in [*sorted((PACKAGE / "moose_ros").rglob("*.py")), *sorted((ROOT / "src" / "moose" / "cli").glob("*.py"))]:
+    for path in [*sorted((PACKAGE / "moose_ros").rglob("*.py")),
+                 *sorted((ROOT / "src" / "moose" / "cli").glob("*.py"))]:
         text = path.read_text(encoding="utf-8")
         assert DEFAULT_GROUP not in text and "43113" not in text, path
     for cls in NODE_PARAMETERS.values():

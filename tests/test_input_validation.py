@@ -21,8 +21,23 @@ import pytest
 from moose.signals import Obstacle, PlanResult, Reference, StateEstimate, Threat
 from moose_ros import convert as cv
 from moose_ros.graph import (
-    ACTUATOR_COMMAND, BLEND, DIAGNOSTICS, GPS, IMU, NODES, OBSTACLES, PLAN_MPC, PLAN_MSF, REFERENCE, STAMP_TOLERANCE,
-    STATE, STEERING, THREAT, TOPICS, WHEEL_SPEEDS, subscribes,
+    ACTUATOR_COMMAND,
+    BLEND,
+    DIAGNOSTICS,
+    GPS,
+    IMU,
+    NODES,
+    OBSTACLES,
+    PLAN_MPC,
+    PLAN_MSF,
+    REFERENCE,
+    STAMP_TOLERANCE,
+    STATE,
+    STEERING,
+    THREAT,
+    TOPICS,
+    WHEEL_SPEEDS,
+    subscribes,
 )
 from moose_ros.interfaces import make
 from moose_ros.runtime import DdsNode
@@ -117,7 +132,8 @@ def test_records_keep_their_values() -> None:
                                                                        0.95, 1, 0.0)
     assert cv.obstacles_from_msg(valid(OBSTACLES.name, 5.0)) == [Obstacle(9.0, 11.0, -2.0, 2.0)]
     t, with_threat, plan = cv.stamped_plan_from_msg(valid(PLAN_MPC.name, 5.0))
-    assert t == 5.0 and with_threat and plan.status == "converged" and plan.accel.shape == (4, 2) and plan.predicted.shape == (5, 4)
+    assert t == 5.0 and with_threat and plan.status == "converged"
+    assert plan.accel.shape == (4, 2) and plan.predicted.shape == (5, 4)
     command = cv.actuator_from_msg(valid(ACTUATOR_COMMAND.name, 5.0))
     assert (command.steering_angle, command.steering_rate, command.torque_rl) == (0.1, 0.5, 20.0)
     assert cv.statuses_from_msg(valid(DIAGNOSTICS.name, 5.0)) == [("some_node", 0, "running")]
@@ -191,8 +207,9 @@ def test_an_inconsistent_obstacle_is_dropped_and_reported_and_the_detector_keeps
         graph.publish(OBSTACLES.name, bad)
         for _ in range(30):  # a car approaching at 7 m/s, 3 m before the zone (wall-clock stamps: no sim time)
             graph.publish(STATE.name, cv.estimate_to_msg(F, StateEstimate(time.time(), 6.0, 0.0, 0.0, 7.0, 0, 0, 0)))
-        assert graph.spin_until(lambda: graph.status["obstacle_detector"][2].get("invalid /perception/obstacles") == "1",
-                                5.0), graph.status
+        assert graph.spin_until(
+            lambda: graph.status["obstacle_detector"][2].get("invalid /perception/obstacles") == "1", 5.0), \
+            graph.status
         level, message, values = graph.status["obstacle_detector"]
         assert level == 1 and "dropped 1 invalid message" in message
         assert "ObstacleArray.obstacles[0].x_min = 12.0 is invalid" in values["invalid:/perception/obstacles"]
@@ -213,7 +230,8 @@ def test_every_node_drops_counts_and_reports_hostile_input_on_every_topic_it_sub
     extra = {"vehicle_simulator": ["--param", "duration=100"], "can_bridge": ["--param", "can_interface=virtual"]}
     graph = Graph(names, extra)
     try:
-        assert graph.spin_until(lambda: set(names) <= set(graph.status), 120.0), f"not up: {set(names) - set(graph.status)}"
+        assert graph.spin_until(lambda: set(names) <= set(graph.status), 120.0), \
+            f"not up: {set(names) - set(graph.status)}"
         sent: dict[str, int] = {}
         for topic, cases in HOSTILE.items():
             for case in cases + BAD_STAMPS:

@@ -43,7 +43,8 @@ def test_wheels_install_into_a_fresh_environment_and_run_from_anywhere(tmp_path:
     assert installed.returncode == 0, installed.stderr[-2000:]
     alone = run([moose, "simulate", "--scenario", "paper_v7_tau1.4", "--duration", "2"], cwd=elsewhere)
     assert alone.returncode == 0, alone.stderr[-2000:]
-    assert "outcome         CLEAR" in alone.stdout and "no bag recorded: the bag recorder comes with the moose_ros" in alone.stderr
+    assert "outcome         CLEAR" in alone.stdout
+    assert "no bag recorded: the bag recorder comes with the moose_ros" in alone.stderr
     refused = run([moose, "simulate", "--duration", "0.5", "--bag", "b"], cwd=elsewhere)
     assert refused.returncode == 2 and "moose: error: --bag 'b': the bag recorder comes with" in refused.stderr
     assert run([python, "-c", "import cyclonedds"], cwd=elsewhere).returncode != 0  # the core does not pull it in
@@ -64,8 +65,8 @@ def test_wheels_install_into_a_fresh_environment_and_run_from_anywhere(tmp_path:
 
     # one node, started by its console script (as `ros2 run` would), announces itself and stops on SIGTERM
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
-    node = subprocess.Popen([str(venv / "bin" / "observer"), "--param", "scenario=paper_v5_tau3"], cwd=elsewhere, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    node = subprocess.Popen([str(venv / "bin" / "observer"), "--param", "scenario=paper_v5_tau3"], cwd=elsewhere,
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         deadline = time.monotonic() + 60.0
         lines = []

@@ -133,7 +133,8 @@ def test_no_odometry_at_all_is_incomplete(tmp_path: Path) -> None:
     """Review: a run without odometry could be printed as collision-free.  The car graph has no ground truth."""
     summary_path = tmp_path / "summary.json"
     result = subprocess.run(MOOSE + ["launch", "car", "--can-interface", "virtual", "--can-channel",
-                                     f"nodom-{os.getpid()}", "--duration", "1", "--no-bag", "--json", str(summary_path)],
+                                     f"nodom-{os.getpid()}", "--duration", "1", "--no-bag", "--json",
+                                     str(summary_path)],
                             capture_output=True, text=True, timeout=120)
     assert result.returncode == 3, result.stdout[-3000:] + result.stderr[-2000:]
     summary = json.loads(summary_path.read_text())
@@ -148,7 +149,8 @@ def test_a_killed_simulator_is_incomplete_and_reported() -> None:
     summary = launch(load_scenario("paper_v5_tau3"), {"scenario": "paper_v5_tau3"}, out=out,
                      faults=[Fault("vehicle_simulator", "kill", 2.6)])
     assert summary["outcome"] == "incomplete" and summary["exit_status"] == 3, summary["reason"]
-    assert summary["node_exits"]["vehicle_simulator"] == -9 and summary["node_status"]["vehicle_simulator"].startswith("died")
+    assert summary["node_exits"]["vehicle_simulator"] == -9
+    assert summary["node_status"]["vehicle_simulator"].startswith("died")
     kinds = {(i["node"], i["kind"]) for i in summary["incidents"]}
     assert {("vehicle_simulator", "fault_injected"), ("vehicle_simulator", "died"), ("launch", "cut_short")} <= kinds
     assert summary["degraded"] and 2.5 < summary["duration_s"] < 3.0

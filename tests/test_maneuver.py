@@ -6,14 +6,18 @@ import math
 import numpy as np
 import pytest
 
-from moose.maneuver import (
-    MaxSteeringTable, integrate_y_max, lateral_steering_index, maneuver_profile, time_to_collision,
-)
-from moose.params import ParamError, VehicleParams
-from moose.tire import pacejka
-from moose.schema import ManeuverParams
-from moose.paper import PAPER_EXPERIMENTS, PAPER_FRICTION, paper_y_max_fit
 from moose.calibration import calibrate, calibration_errors
+from moose.maneuver import (
+    MaxSteeringTable,
+    integrate_y_max,
+    lateral_steering_index,
+    maneuver_profile,
+    time_to_collision,
+)
+from moose.paper import PAPER_EXPERIMENTS, PAPER_FRICTION, paper_y_max_fit
+from moose.params import ParamError, VehicleParams
+from moose.schema import ManeuverParams
+from moose.tire import pacejka
 
 VEHICLE = VehicleParams(mu=PAPER_FRICTION)
 MU = VEHICLE.mu
@@ -222,7 +226,8 @@ def test_time_to_collision() -> None:
 def test_lateral_steering_index(table: MaxSteeringTable) -> None:
     assert lateral_steering_index(2.0, 2.0, 7.0, table) == pytest.approx(2.0 / table.y_max(2.0, 7.0))
     assert lateral_steering_index(2.0, 3.0, 7.0, table) < lateral_steering_index(2.0, 1.5, 7.0, table)
-    assert lateral_steering_index(4.0, 2.0, 7.0, table) == pytest.approx(2.0 * lateral_steering_index(2.0, 2.0, 7.0, table))
+    assert (lateral_steering_index(4.0, 2.0, 7.0, table)
+            == pytest.approx(2.0 * lateral_steering_index(2.0, 2.0, 7.0, table)))
     assert lateral_steering_index(2.0, 0.0, 7.0, table) == math.inf  # no time left
     assert lateral_steering_index(2.0, -0.5, 7.0, table) == math.inf  # beside the zone
     assert lateral_steering_index(2.0, 1.0, 0.0, table) == math.inf  # a car at rest cannot move aside

@@ -8,15 +8,16 @@ import pytest
 
 from moose.motion import MotionController
 from moose.params import ParamError, VehicleParams
+from moose.schema import MotionParams
 from moose.signals import Reference, StateEstimate
 from moose.vehicle import DELTA, VX, VehiclePlant, initial_state
-from moose.schema import MotionParams
 
 P = VehicleParams()
 DT = 0.01
+MOTION = MotionParams()
 
 
-def run(reference: Reference, seconds: float, vx0: float = 5.0, params: MotionParams = MotionParams(),
+def run(reference: Reference, seconds: float, vx0: float = 5.0, params: MotionParams = MOTION,
         vehicle: VehicleParams = P) -> np.ndarray:
     """Closed loop at 100 Hz on the plant; rows (t, v_x, δ, T, δ̇_cmd)."""
     plant, ctrl = VehiclePlant(vehicle), MotionController(params, vehicle)

@@ -11,7 +11,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from moose.mpc import (
-    MpcPlanner, epsilon, j_brake, j_safe, j_stable, j_steer, kinematic_rollout, past_obstacle, y_safe,
+    MpcPlanner,
+    epsilon,
+    j_brake,
+    j_safe,
+    j_stable,
+    j_steer,
+    kinematic_rollout,
+    past_obstacle,
+    y_safe,
 )
 from moose.params import G, ParamError
 from moose.projected_newton import CompilerMissing

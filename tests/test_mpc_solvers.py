@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from moose.mpc import MpcPlanner, SolveResult, Solver, build_problem, create, register, registered
+from moose.mpc import MpcPlanner, Solver, SolveResult, build_problem, create, register, registered
 from moose.schema import SOLVERS, MpcParams, PlanningGrid
 from moose.signals import Obstacle, PlannerInput, StateEstimate, Threat
 

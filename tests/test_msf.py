@@ -11,13 +11,13 @@ from moose.maneuver import MaxSteeringTable
 from moose.msf import MsfPlanner, zoh_rollout
 from moose.paper import PAPER_FRICTION
 from moose.params import ParamError, VehicleParams
-from moose.schema import Config, MsfParams
+from moose.schema import Config, DetectorParams, ManeuverParams, MsfParams
 from moose.signals import Obstacle, PlannerInput, StateEstimate
-from moose.schema import DetectorParams, ManeuverParams
 
 VEHICLE = VehicleParams(mu=PAPER_FRICTION)
 GRID = Config(vehicle=VEHICLE).grid
 T_S = 0.2
+MSF = MsfParams()
 
 
 @pytest.fixture(scope="module")
@@ -31,7 +31,7 @@ def estimate_of(t: float, s: np.ndarray) -> StateEstimate:
 
 
 def closed_loop(table: MaxSteeringTable, v: float, zone: Obstacle, steps: int = 40,
-                params: MsfParams = MsfParams()) -> tuple[np.ndarray, list]:
+                params: MsfParams = MSF) -> tuple[np.ndarray, list]:
     """Detector + MSF re-planning at 5 Hz on the kinematic model, applying the first input each time.
 
     Returns the states every 10 ms (the exact zero-order-hold parabolas between plans) and the plans.

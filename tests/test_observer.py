@@ -16,14 +16,16 @@ import pytest
 
 from moose.observer import StateObserver
 from moose.params import ParamError, VehicleParams, replace
+from moose.schema import ObserverParams, SensorParams
 from moose.sensors import Sensors
 from moose.signals import EpsSample, GpsSample, ImuSample, StateEstimate, WheelSpeedSample
 from moose.vehicle import DELTA, GAMMA, THETA, VX, VY, VehiclePlant, X, Y, initial_state
-from moose.schema import ObserverParams, SensorParams
 
 P = VehicleParams(mu=0.5)  # a test drive that excites the lateral dynamics
 V0 = 7.0
-LAG = SensorParams().gps_lag_s
+SENSORS = SensorParams()
+LAG = SENSORS.gps_lag_s
+OBSERVER = ObserverParams()
 DT = 0.01
 
 
@@ -60,8 +62,8 @@ class Run:
         return np.hypot(self.est[:, 0] - self.truth[:, X], self.est[:, 1] - self.truth[:, Y])
 
 
-def double_lane_change(seed: int = 11, observer: ObserverParams = ObserverParams(),
-                       sensors: SensorParams = SensorParams(), plant_mu: float = P.mu, model_mu: float = P.mu,
+def double_lane_change(seed: int = 11, observer: ObserverParams = OBSERVER,
+                       sensors: SensorParams = SENSORS, plant_mu: float = P.mu, model_mu: float = P.mu,
                        vx_initial_estimate: float = 5.5, seconds: float = 8.0) -> Run:
     """Real plant at 7 m/s, δ ≤ 0.15 rad through the EPS loop, 15 N m per rear motor."""
     vehicle = replace(P, mu=plant_mu)

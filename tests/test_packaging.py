@@ -25,7 +25,8 @@ def test_the_core_never_imports_moose_ros() -> None:
             elif isinstance(node, ast.Call) and getattr(node.func, "attr", getattr(node.func, "id", "")) in (
                     "import_module", "__import__"):
                 names = [a.value for a in node.args if isinstance(a, ast.Constant) and isinstance(a.value, str)]
-            offenders += [f"{path.relative_to(ROOT)}:{node.lineno}: {n}" for n in names if n.split(".")[0] == "moose_ros"]
+            offenders += [f"{path.relative_to(ROOT)}:{node.lineno}: {n}"
+                          for n in names if n.split(".")[0] == "moose_ros"]
     assert offenders == []
 
 

@@ -69,7 +69,8 @@ def test_missing_file_is_a_clear_error(tmp_path: Path) -> None:
 @pytest.mark.parametrize("field, value", [("T_max", 300.0), ("delta_max", 0.5), ("delta_rate_max", 2618.0),
                                           ("torque_rate_max", 1e5)])
 def test_configuration_cannot_loosen_the_hard_limits(field: str, value: float) -> None:
-    with pytest.raises(ParamError, match=rf"vehicle\.{field} = .* is invalid: expected at most the vehicle's hard limit"):
+    with pytest.raises(ParamError,
+                       match=rf"vehicle\.{field} = .* is invalid: expected at most the vehicle's hard limit"):
         VehicleParams(**{field: value})
     tighter = VehicleParams(**{field: getattr(VEHICLE_LIMITS, field) / 2})
     assert getattr(tighter, field) == getattr(VEHICLE_LIMITS, field) / 2
@@ -77,7 +78,8 @@ def test_configuration_cannot_loosen_the_hard_limits(field: str, value: float) -
 
 def test_acceleration_limits_of_the_vehicle() -> None:
     # rear motors only: 2 T_max / r = 1329 N on 925 kg plus the wheels' 2 J / r^2 = 27.4 kg
-    assert VehicleParams(mu=0.8).longitudinal_accel_limit == pytest.approx(2 * 200 / 0.301 / (925 + 2 * 1.24 / 0.301**2))
+    assert VehicleParams(mu=0.8).longitudinal_accel_limit == pytest.approx(
+        2 * 200 / 0.301 / (925 + 2 * 1.24 / 0.301**2))
     # on ice the rear tyres limit first: mu F_zr = 0.1 * 925 * 9.81 * 0.99 / 1.7 = 528 N
     assert VehicleParams(mu=0.1).longitudinal_accel_limit == pytest.approx(
         0.1 * 925 * 9.81 * 0.99 / 1.7 / (925 + 2 * 1.24 / 0.301**2))

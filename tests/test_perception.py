@@ -10,15 +10,16 @@ from moose.detector import ObstacleDetector
 from moose.maneuver import MaxSteeringTable, lateral_steering_index
 from moose.observer import StateObserver
 from moose.params import VehicleParams
+from moose.schema import DetectorParams, ManeuverParams, ObserverParams, SensorParams
 from moose.sensors import Sensors
 from moose.signals import EpsSample, GpsSample, ImuSample, Obstacle, StateEstimate, WheelSpeedSample
 from moose.vehicle import DELTA, VehiclePlant, initial_state
-from moose.schema import DetectorParams, ManeuverParams, ObserverParams, SensorParams
 
 P = VehicleParams()
+OBSERVER = ObserverParams()
 
 
-def double_lane_change(seed: int, observer_params: ObserverParams = ObserverParams(), seconds: float = 8.0):
+def double_lane_change(seed: int, observer_params: ObserverParams = OBSERVER, seconds: float = 8.0):
     plant = VehiclePlant(P)
     plant.reset(initial_state(P, vx=7.0))
     sensors = Sensors(SensorParams(), P, np.random.default_rng(seed))
@@ -43,7 +44,8 @@ def double_lane_change(seed: int, observer_params: ObserverParams = ObserverPara
 
 def test_sensor_rates_lag_and_determinism() -> None:
     _, _, samples = double_lane_change(1, seconds=3.0)
-    count = {kind: sum(isinstance(s, kind) for s in samples) for kind in (ImuSample, GpsSample, WheelSpeedSample, EpsSample)}
+    count = {kind: sum(isinstance(s, kind) for s in samples)
+             for kind in (ImuSample, GpsSample, WheelSpeedSample, EpsSample)}
     assert count[ImuSample] == count[WheelSpeedSample] == count[EpsSample] == 300
     assert count[GpsSample] == 3  # fixes measured at 0, 1, 2 s, delivered 0.2 s later
     for fix in (s for s in samples if isinstance(s, GpsSample)):
@@ -107,5 +109,6 @@ def test_detector_measures(table: MaxSteeringTable) -> None:
 
 def test_detector_picks_the_cheaper_side(table: MaxSteeringTable) -> None:
     detector = ObstacleDetector(DetectorParams(), table)
-    threat = detector.update(0.0, StateEstimate(0.0, 0.0, 0.0, 0.0, 6.0, 0.0, 0.0, 0.0), [Obstacle(20.0, 22.0, -0.5, 3.0)])
+    threat = detector.update(0.0, StateEstimate(0.0, 0.0, 0.0, 0.0, 6.0, 0.0, 0.0, 0.0),
+                             [Obstacle(20.0, 22.0, -0.5, 3.0)])
     assert threat is not None and threat.side == -1 and threat.w == pytest.approx(0.5)

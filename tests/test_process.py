@@ -6,6 +6,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 from moose_ros.process import PARENT_ENV, descendants, spawn, stop
 
@@ -20,7 +21,7 @@ time.sleep(30)
 
 def _state(pid: int) -> str:
     try:
-        stat = open(f"/proc/{pid}/stat").read()
+        stat = Path(f"/proc/{pid}/stat").read_text()
     except OSError:
         return "gone"
     return stat[stat.rindex(")") + 2]
@@ -34,8 +35,9 @@ def test_a_spawned_child_dies_with_its_sigkilled_parent() -> None:
         assert parent.stdout is not None
         child = int(parent.stdout.readline())
         time.sleep(0.3)  # the shim has exec'd sleep
-        assert descendants(parent.pid) == [child] and open(f"/proc/{child}/cmdline").read().startswith("sleep")
-        assert f"{PARENT_ENV}={parent.pid}" in open(f"/proc/{child}/environ").read().split("\0")
+        assert descendants(parent.pid) == [child]
+        assert Path(f"/proc/{child}/cmdline").read_text().startswith("sleep")
+        assert f"{PARENT_ENV}={parent.pid}" in Path(f"/proc/{child}/environ").read_text().split("\0")
     finally:
         parent.kill()
         parent.wait()

@@ -42,8 +42,8 @@ from moose.metrics import summarize
 from moose.scenario import load_scenario
 from moose.simulation import simulate
 from moose_ros.graph import FRAME_IMU, FRAME_ODOM, FRAME_TRUTH, GRAPHS, TOPICS
-from moose_ros.launch import node_overrides
 from moose_ros.interfaces import typestore
+from moose_ros.launch import node_overrides
 
 pytestmark = [pytest.mark.graph, pytest.mark.slow]
 
@@ -61,7 +61,8 @@ PROBE = textwrap.dedent(r'''
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import Imu
 
-    expected, topics, queries, limit = json.loads(sys.argv[1]), json.loads(sys.argv[2]), json.loads(sys.argv[3]), float(sys.argv[4])
+    expected, topics, queries = json.loads(sys.argv[1]), json.loads(sys.argv[2]), json.loads(sys.argv[3])
+    limit = float(sys.argv[4])
     rclpy.init()
     node = rclpy.create_node("ros2_user_probe")
     samples = {"/vehicle/odom": [], "/vehicle/imu": []}
@@ -74,8 +75,8 @@ PROBE = textwrap.dedent(r'''
     spin = lambda: rclpy.spin_once(node, timeout_sec=0.05)
 
     def endpoints(infos):
-        return sorted([i.node_name, i.node_namespace, i.topic_type, str(i.topic_type_hash), i.qos_profile.reliability.name,
-                       i.qos_profile.durability.name] for i in infos)
+        return sorted([i.node_name, i.node_namespace, i.topic_type, str(i.topic_type_hash),
+                       i.qos_profile.reliability.name, i.qos_profile.durability.name] for i in infos)
 
     def graph():
         return {t: {"publishers": endpoints(node.get_publishers_info_by_topic(t)),
@@ -101,7 +102,8 @@ PROBE = textwrap.dedent(r'''
             spin()
         kinds = {1: "bool_value", 2: "integer_value", 3: "double_value", 4: "string_value", 9: "string_array_value"}
         report["parameters"][target] = {
-            "values": {n: (getattr(v, kinds[v.type]) if v.type in kinds else None) for n, v in zip(names, values.result().values)},
+            "values": {n: (getattr(v, kinds[v.type]) if v.type in kinds else None)
+                       for n, v in zip(names, values.result().values)},
             "names": sorted(every.result().result.names)}
     report["samples"] = samples
     print(json.dumps(report, default=list), flush=True)
@@ -217,7 +219,7 @@ def test_full_graph_on_rclpy_reproduces_the_lockstep_outcome_and_is_what_ros2_sh
         pubs, subs = report["graph"][name]["publishers"], report["graph"][name]["subscriptions"]
         # every publisher is a node of the contract, with the contract's QoS and the type's RIHS01 hash
         assert sorted(p[0] for p in pubs) == sorted(n for n in topic.publishers if n in nodes), name
-        for node_name, namespace, kind, type_hash, reliability, durability in pubs:
+        for _node_name, namespace, kind, type_hash, reliability, durability in pubs:
             assert (namespace, kind, type_hash) == ("/", topic.type, store.hash_rihs01(topic.type)), name
             assert reliability == ("RELIABLE" if topic.qos.reliable else "BEST_EFFORT"), name
             assert durability == ("TRANSIENT_LOCAL" if topic.qos.transient_local else "VOLATILE"), name
@@ -234,7 +236,8 @@ def test_full_graph_on_rclpy_reproduces_the_lockstep_outcome_and_is_what_ros2_sh
     given = node_overrides("full", "combined", {"scenario": SCENARIO, "vehicle.mu": load_scenario(SCENARIO).mu},
                            rate=RATE)
     params = report["parameters"]
-    assert params["observer"]["values"] == {"use_sim_time": True, "scenario": SCENARIO, "simulation.planner": "combined",
+    assert params["observer"]["values"] == {"use_sim_time": True, "scenario": SCENARIO,
+                                            "simulation.planner": "combined",
                                             "vehicle.mu": given["observer"]["vehicle.mu"]}
     assert params["vehicle_simulator"]["values"] == {
         "use_sim_time": False, "scenario": SCENARIO, "seed": 0, "rate": RATE, "vehicle_bus": "topics",

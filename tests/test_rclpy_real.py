@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any, Iterator, Optional
 
 import pytest
+
 from rtps_capture import RtpsCapture
 
 ODOM, COMMAND = "nav_msgs/msg/Odometry", "moose_msgs/msg/ActuatorCommand"
@@ -48,7 +49,8 @@ def _sample(i: int, kind: str) -> dict[str, Any]:
 
 TOPICS = {
     ODOM: {"topic": "/vehicle/odom", "sensor": True, "samples": [_sample(i, ODOM) for i in range(3)]},
-    COMMAND: {"topic": "/control/actuator_command", "sensor": False, "samples": [_sample(i, COMMAND) for i in range(3)]},
+    COMMAND: {"topic": "/control/actuator_command", "sensor": False,
+              "samples": [_sample(i, COMMAND) for i in range(3)]},
 }
 """The graph's topics and QoS (nodes.py): odometry best effort keep-last 5 (QOS_SENSOR, rclpy's
 qos_profile_sensor_data), actuator commands reliable keep-last 10 (QOS_DEFAULT, rclpy's default)."""
@@ -101,7 +103,8 @@ CHILD = textwrap.dedent(r'''
         spin = lambda: rclpy.spin_once(node, timeout_sec=0.01)
 
         def graph():  # the publishers this client sees on each topic: (node, type)
-            return {spec["topic"]: sorted([i.node_name, i.topic_type] for i in node.get_publishers_info_by_topic(spec["topic"]))
+            return {spec["topic"]: sorted([i.node_name, i.topic_type]
+                                          for i in node.get_publishers_info_by_topic(spec["topic"]))
                     for spec in topics.values()}
 
         def close():
@@ -142,7 +145,8 @@ CHILD = textwrap.dedent(r'''
             got = {kind: [] for kind in topics}
             for kind, spec in topics.items():
                 paths = list(spec["samples"][0])
-                subscribe(kind, spec, lambda msg, kind=kind, paths=paths: got[kind].append({p: get(msg, p) for p in paths}))
+                subscribe(kind, spec,
+                          lambda msg, kind=kind, paths=paths: got[kind].append({p: get(msg, p) for p in paths}))
             want = {kind: {json.dumps(s, sort_keys=True) for s in spec["samples"]} for kind, spec in topics.items()}
             complete = lambda: all(want[k] <= {json.dumps(s, sort_keys=True) for s in got[k]} for k in topics)
             while time.monotonic() < deadline and not complete():
@@ -276,8 +280,8 @@ NETNS_PROBE = textwrap.dedent(r'''
     seen = {}
     for scope in ("LOCALHOST", "SUBNET"):
         with RtpsCapture(int(os.environ["ROS_DOMAIN_ID"])) as cap:
-            talker = subprocess.Popen([os.environ["MOOSE_ROS_PYTHON"], "-c", child, "rclpy", "talk", "probe", "3", topics],
-                                      env={**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": scope})
+            talker = subprocess.Popen([os.environ["MOOSE_ROS_PYTHON"], "-c", child, "rclpy", "talk", "probe", "3",
+                                       topics], env={**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": scope})
             talker.wait(30)
             time.sleep(0.2)
         seen[scope] = [[interface, vendor, n] for (interface, vendor), n in cap.seen.items()]

@@ -18,12 +18,12 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from ros2_prefix import ros_prefix
 
 from moose.params import ParamError
 from moose_ros import runtime
 from moose_ros.graph import NODES, publishes, subscribes
 from moose_ros.interfaces import typestore
+from ros2_prefix import ros_prefix
 
 pytestmark = [pytest.mark.graph]
 
@@ -63,8 +63,8 @@ CONFORMANCE = textwrap.dedent(r'''
     n = node("planner_node", params_file=str(good), overrides={"vehicle.m": 900.0})
     out["type"] = type(n).__name__
     out["params"] = [n.param("rate"), n.param("vehicle.mu"), n.param("vehicle.m"), n.declare_parameter("rate", 1.0),
-                     type(n.get_parameter("rate")).__name__, n.declare_parameter("horizon", 10), n.get_parameter("horizon"),
-                     n.use_sim_time]
+                     type(n.get_parameter("rate")).__name__, n.declare_parameter("horizon", 10),
+                     n.get_parameter("horizon"), n.use_sim_time]
     out["param_errors"] = errors(lambda: n.declare_parameter("name", 1.0), lambda: n.get_parameter("missing"))
     n.shutdown()
     other = node("other_node", params_file=str(good))
@@ -327,7 +327,8 @@ PARAM_PROBE = textwrap.dedent(r'''
     node = rclpy.create_node("entry_point_probe")
     target, names = sys.argv[1], json.loads(sys.argv[2])
     deadline = time.monotonic() + 60
-    while time.monotonic() < deadline and target not in [f"{ns.rstrip('/')}/{n}" for n, ns in node.get_node_names_and_namespaces()]:
+    while time.monotonic() < deadline and target not in [f"{ns.rstrip('/')}/{n}"
+                                                         for n, ns in node.get_node_names_and_namespaces()]:
         rclpy.spin_once(node, timeout_sec=0.1)
     client = node.create_client(GetParameters, f"{target}/get_parameters")
     client.wait_for_service(timeout_sec=20)
@@ -335,7 +336,8 @@ PARAM_PROBE = textwrap.dedent(r'''
     while time.monotonic() < deadline and not future.done():
         rclpy.spin_once(node, timeout_sec=0.1)
     publishers = sorted({i.node_name for i in node.get_publishers_info_by_topic("/perception/state")})
-    print(json.dumps({"values": [v.string_value or v.bool_value for v in future.result().values], "publishers": publishers}))
+    print(json.dumps({"values": [v.string_value or v.bool_value for v in future.result().values],
+                      "publishers": publishers}))
 ''')
 
 

@@ -8,7 +8,16 @@ import pytest
 
 from moose.config import load_config
 from moose.reproduce import (
-    COMPARISON, NINE, RUNS, Claim, Run, claims, render_claims, render_results, render_summary, run_all,
+    COMPARISON,
+    NINE,
+    RUNS,
+    Claim,
+    Run,
+    claims,
+    render_claims,
+    render_results,
+    render_summary,
+    run_all,
     update_document,
 )
 

@@ -11,17 +11,17 @@ import cyclonedds.idl.types as t
 import pytest
 from cyclonedds.core import Policy, Qos
 from cyclonedds.domain import DomainParticipant
-from isolation import claim_udp_port
-from cyclonedds.util import duration
 from cyclonedds.idl import IdlStruct
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
+from cyclonedds.util import duration
 
+from isolation import claim_udp_port
+from moose.config import load_config
 from moose.metrics import summarize
 from moose.params import ParamError
 from moose.scenario import load_scenario
 from moose.simulation import simulate
-from moose.config import load_config
 from moose_ros.faults import Fault
 from moose_ros.launch import launch
 from moose_ros.runtime import DdsNode
@@ -176,7 +176,8 @@ def test_bad_input_gives_clear_errors(tmp_path: Path) -> None:
     assert missing.returncode == 2 and "no such file" in missing.stderr
     bad = tmp_path / "bad.yaml"
     bad.write_text("/**:\n  ros__parameters:\n    vehicle: {m: heavy}\n")
-    wrong = subprocess.run(moose + ["node", "observer", "--params", str(bad)], capture_output=True, text=True, timeout=60)
+    wrong = subprocess.run(moose + ["node", "observer", "--params", str(bad)], capture_output=True, text=True,
+                           timeout=60)
     assert wrong.returncode == 2 and "vehicle.m = 'heavy'" in wrong.stderr
     node = DdsNode("typo_check")
     publish = node.publisher("nav_msgs/msg/Odometry", "/vehicle/odom")

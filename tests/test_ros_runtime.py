@@ -12,7 +12,8 @@ import time
 from pathlib import Path
 
 import pytest
-from cyclonedds.core import Policy, Qos as DdsQos
+from cyclonedds.core import Policy
+from cyclonedds.core import Qos as DdsQos
 from cyclonedds.domain import DomainParticipant
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
@@ -20,7 +21,14 @@ from cyclonedds.topic import Topic
 from moose.params import ParamError
 from moose_ros.interfaces import message_class
 from moose_ros.runtime import (
-    QOS_DEFAULT, QOS_LATCHED, QOS_SENSOR, DdsNode, Qos, create_node, dds_topic_name, resolve_topic,
+    QOS_DEFAULT,
+    QOS_LATCHED,
+    QOS_SENSOR,
+    DdsNode,
+    Qos,
+    create_node,
+    dds_topic_name,
+    resolve_topic,
 )
 
 pytestmark = [pytest.mark.graph]
@@ -116,7 +124,8 @@ def test_pub_sub_round_trip_between_two_processes_at_100_hz() -> None:
             sent[0] += 1
 
     try:
-        assert spin_until(node, lambda: ping.subscription_count() > 0 and node.count_publishers("/rt_test/pong") > 0, 20)
+        assert spin_until(node, lambda: ping.subscription_count() > 0 and node.count_publishers("/rt_test/pong") > 0,
+                          20)
         node.timer(0.01, tick)
         assert spin_until(node, lambda: len(pongs) >= count, 30)
         ping(node.make(WHEELS, omega_rl=-1.0))  # end marker

@@ -3,8 +3,9 @@ clients that share no code with our runtime:
 
 - a plain WebSocket client speaking the Foxglove WebSocket protocol to the live view (subprotocol
   ``foxglove.sdk.v1``, the protocol's current name, which foxglove-sdk 0.30 requires; older servers
-  spoke ``foxglove.websocket.v1``, offered too): every channel of the graph contract advertised with its ROS 2 schema, odometry and TF
-  received and decoded by rosbags' CDR, the server listening on the loopback address only;
+  spoke ``foxglove.websocket.v1``, offered too): every channel of the graph contract advertised
+  with its ROS 2 schema, odometry and TF received and decoded by rosbags' CDR, the server listening
+  on the loopback address only;
 - rclpy 7.1.6 on Fast DDS (ROS 2 Jazzy from the PyPI wheels), in a process of its own: every node of the
   graph with exactly the publishers and subscriptions of the graph contract
   (``get_node_names_and_namespaces``, ``get_publisher_names_and_types_by_node``,
@@ -181,7 +182,8 @@ PROBE = textwrap.dedent(r'''
         if name in expected:
             out["endpoints"][name] = {
                 "publishers": sorted([t, sorted(k)] for t, k in node.get_publisher_names_and_types_by_node(name, ns)),
-                "subscriptions": sorted([t, sorted(k)] for t, k in node.get_subscriber_names_and_types_by_node(name, ns)),
+                "subscriptions": sorted([t, sorted(k)]
+                                        for t, k in node.get_subscriber_names_and_types_by_node(name, ns)),
             }
     for topic in json.loads(sys.argv[4]):
         out["topics"][topic] = sorted([i.node_name, i.node_namespace, i.topic_type, str(i.topic_type_hash)]
@@ -258,8 +260,8 @@ def test_rclpy_sees_every_node_its_endpoints_and_type_hashes(graph: Graph) -> No
     # every standard type the client has, and moose_msgs' and tf2_msgs' when `make ros` built them (no wheel
     # carries tf2_msgs; test_ros_introspection.py also checks its hash against Jazzy's published value)
     importable = {t for t, h in seen["rclpy_hashes"].items() if h}
-    assert {"nav_msgs/msg/Odometry", "sensor_msgs/msg/Imu", "rosgraph_msgs/msg/Clock", "diagnostic_msgs/msg/DiagnosticArray",
-            "visualization_msgs/msg/MarkerArray"} <= importable
+    assert {"nav_msgs/msg/Odometry", "sensor_msgs/msg/Imu", "rosgraph_msgs/msg/Clock",
+            "diagnostic_msgs/msg/DiagnosticArray", "visualization_msgs/msg/MarkerArray"} <= importable
     if any(t.startswith("moose_msgs/") for t in importable):
         assert "tf2_msgs/msg/TFMessage" in importable
     assert checked_with_rclpy == importable & {t.type for t in TOPICS.values()}

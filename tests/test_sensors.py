@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from moose.params import ParamError, VehicleParams
+from moose.schema import SensorParams
 from moose.sensors import Sensors
 from moose.signals import EpsSample, GpsSample, ImuSample, WheelSpeedSample
 from moose.vehicle import DELTA, GAMMA, OMEGA_RL, OMEGA_RR, THETA, VX, VY, X, Y
-from moose.schema import SensorParams
 
 P = VehicleParams()
 
@@ -52,7 +52,8 @@ def test_coarse_calls_deliver_one_sample_per_call_not_bursts() -> None:
     times = [s.t for s in of(ImuSample, samples)]
     assert len(times) == len(set(times)) == int(round(1.0 / 0.03))
     late = collect(SensorParams(), 2.0, dt=0.01, t0=100.0)  # a clock that does not start at zero
-    assert len(of(ImuSample, late)) == 200 and [f.t_measured for f in of(GpsSample, late)] == pytest.approx([100.0, 101.0])
+    assert len(of(ImuSample, late)) == 200
+    assert [f.t_measured for f in of(GpsSample, late)] == pytest.approx([100.0, 101.0])
 
 
 @pytest.mark.parametrize("lag", [0.2, 0.35, 0.0])
@@ -96,7 +97,8 @@ def test_noise_is_zero_mean_with_the_configured_deviation() -> None:
 
 
 def test_deterministic_for_a_seed() -> None:
-    a, b, c = collect(SensorParams(), 3.0, seed=7), collect(SensorParams(), 3.0, seed=7), collect(SensorParams(), 3.0, seed=8)
+    a, b = collect(SensorParams(), 3.0, seed=7), collect(SensorParams(), 3.0, seed=7)
+    c = collect(SensorParams(), 3.0, seed=8)
     assert a == b
     assert a != c and [type(s) for s in a] == [type(s) for s in c]
 

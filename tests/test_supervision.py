@@ -8,8 +8,16 @@ from moose.canbus.ecu import ECU_TIMEOUT
 from moose.cli.common import EXIT_DEGRADED, EXIT_FAILED, EXIT_INCOMPLETE, EXIT_INTERRUPTED
 from moose.params import ParamError
 from moose_ros.faults import Fault, matrix_cases
-from moose_ros.graph import (ACTUATOR_COMMAND, COMMAND_TIMEOUT, GRAPHS, NODES, PLAN_MPC, STATE, TOPICS,
-                             essential_upstream)
+from moose_ros.graph import (
+    ACTUATOR_COMMAND,
+    COMMAND_TIMEOUT,
+    GRAPHS,
+    NODES,
+    PLAN_MPC,
+    STATE,
+    TOPICS,
+    essential_upstream,
+)
 from moose_ros.incidents import DEGRADING, KINDS, IncidentLog, exit_status
 from moose_ros.nodes.base import InputWatch
 

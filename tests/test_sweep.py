@@ -21,15 +21,15 @@ import pytest
 
 pytest.importorskip("pyarrow")
 
-from moose.cli import main  # noqa: E402
-from moose.config import load_config  # noqa: E402
-from moose.maneuver import MaxSteeringTable  # noqa: E402
-from moose.paper import PAPER_FRICTION  # noqa: E402
-from moose.params import ParamError, replace  # noqa: E402
-from moose.sweep.axes import parse_axis, unit_samples  # noqa: E402
-from moose.sweep.case import MACHINE_COLUMNS  # noqa: E402
-from moose.sweep.spec import SweepSpec  # noqa: E402
-from moose.sweep.store import read_results  # noqa: E402
+from moose.cli import main
+from moose.config import load_config
+from moose.maneuver import MaxSteeringTable
+from moose.paper import PAPER_FRICTION
+from moose.params import ParamError, replace
+from moose.sweep.axes import parse_axis, unit_samples
+from moose.sweep.case import MACHINE_COLUMNS
+from moose.sweep.spec import SweepSpec
+from moose.sweep.store import read_results
 
 MOOSE = [sys.executable, "-m", "moose.cli"]
 
@@ -149,7 +149,8 @@ def test_a_folder_of_another_sweep_is_refused(tmp_path: Path, capsys: pytest.Cap
     out = tmp_path / "s"
     assert main(BASE + ["-o", str(out), "--workers", "1"]) == 0
     before = (out / "cases.jsonl").read_bytes()
-    assert main(["sweep", "--speed", "6", "--tau", "2", "--nu", "0.5", "--duration", "2", "-o", str(out), "--quiet"]) == 2
+    assert main(["sweep", "--speed", "6", "--tau", "2", "--nu", "0.5", "--duration", "2", "-o", str(out),
+                 "--quiet"]) == 2
     assert "holds a different sweep" in capsys.readouterr().err
     assert main(BASE + ["-o", str(out)]) == 2  # the same sweep again: only with --resume
     assert "--resume continues it" in capsys.readouterr().err
@@ -283,7 +284,8 @@ def test_failing_cases_are_recorded_and_the_sweep_goes_on(tmp_path: Path) -> Non
     # case from the moment it is started.
     out2 = tmp_path / "s2"
     args2 = MOOSE + ["sweep", "--speed", "6", "--tau", "2", "--nu", "0.5", "--planner", "msf", "--duration", "60",
-                     "--set", "simulation.plant_dt=0.0001", "--seeds", "3", "--workers", "2", "-o", str(out2), "--quiet"]
+                     "--set", "simulation.plant_dt=0.0001", "--seeds", "3", "--workers", "2", "-o", str(out2),
+                   "--quiet"]
     process = subprocess.Popen(args2, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
 
     def workers() -> list[int]:
@@ -412,7 +414,8 @@ def test_a_journal_line_cut_by_a_kill_costs_only_that_case(tmp_path: Path) -> No
             "-o", str(out), "--workers", "1", "--quiet"]
     assert main(args) == 0
     lines = (out / "cases.jsonl").read_text().splitlines()
-    (out / "cases.jsonl").write_text(lines[0] + "\n" + lines[1][: len(lines[1]) // 2])  # as a SIGKILL mid-write leaves it
+    # as a SIGKILL mid-write leaves it
+    (out / "cases.jsonl").write_text(lines[0] + "\n" + lines[1][: len(lines[1]) // 2])
     assert main(args + ["--resume"]) == 0  # reruns the cut case only
     rows = rows_of(out)
     assert len(rows) == 2 and {r["case_id"] for r in rows} == {json.loads(line)["case_id"] for line in lines}

@@ -6,7 +6,21 @@ import pytest
 
 from moose.params import ParamError, VehicleParams
 from moose.vehicle import (
-    DELTA, GAMMA, OMEGA_RL, OMEGA_RR, THETA, VX, VY, X, Y, VehiclePlant, initial_state, slip_time_constant, RK4_STABILITY as RK4_LIMIT,
+    DELTA,
+    GAMMA,
+    OMEGA_RL,
+    OMEGA_RR,
+    THETA,
+    VX,
+    VY,
+    VehiclePlant,
+    X,
+    Y,
+    initial_state,
+    slip_time_constant,
+)
+from moose.vehicle import (
+    RK4_STABILITY as RK4_LIMIT,
 )
 
 P = VehicleParams()

@@ -14,15 +14,17 @@ from moose.verdict import clearance, judge, segment_hits_box
 ZONE = Obstacle(20.0, 22.0, -2.0, 2.0)
 FIELD = Obstacle(-50.0, 150.0, -5.0, 10.0)
 END = 8.0
+VERDICT = VerdictParams()
 
 
-def straight(y: float = 3.0, v: float = 6.0, dt: float = 0.01, end: float = END, x0: float = 0.0) -> dict[str, np.ndarray]:
+def straight(y: float = 3.0, v: float = 6.0, dt: float = 0.01, end: float = END,
+             x0: float = 0.0) -> dict[str, np.ndarray]:
     t = np.arange(0.0, end + 1e-9, dt)
     return {"t": t, "x": x0 + v * t, "y": np.full_like(t, y), "theta": np.zeros_like(t), "vx": np.full_like(t, v),
             "vy": np.zeros_like(t)}
 
 
-def verdict(tr: dict[str, np.ndarray], params: VerdictParams = VerdictParams()):
+def verdict(tr: dict[str, np.ndarray], params: VerdictParams = VERDICT):
     return judge(tr["t"], tr["x"], tr["y"], tr["theta"], tr["vx"], tr["vy"], ZONE, FIELD, END, params)
 
 

@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from moose.msf import zoh_rollout
 from moose.fbl import FeedbackLinearization
+from moose.msf import zoh_rollout
 from moose.params import ParamError, VehicleParams
 from moose.schema import FblParams, WeightParams
 from moose.signals import Blend, Obstacle, PlanResult, StateEstimate, Threat
@@ -74,7 +74,8 @@ def test_steering_usage_of_the_first_steps() -> None:
 def test_blend_is_convex_and_failure_falls_back_to_msf() -> None:
     f = wf(smoothing=1.0)
     rng = np.random.default_rng(1)
-    mpc = PlanResult(rng.uniform(-1, 1, (10, 2)), "converged", 5, 1e-3, 1.0, zoh_rollout(np.array([0, 0, 7.0, 0]), np.zeros((10, 2)), 0.2))
+    mpc = PlanResult(rng.uniform(-1, 1, (10, 2)), "converged", 5, 1e-3, 1.0,
+                     zoh_rollout(np.array([0, 0, 7.0, 0]), np.zeros((10, 2)), 0.2))
     msf = plan(3.0, "ok")
     blend = f.blend(mpc, msf, threat(), EST)
     assert 0.0 < blend.weight_mpc < 1.0

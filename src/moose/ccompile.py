@@ -46,7 +46,7 @@ class CompiledFunction:
         self._w = np.zeros(n_w)
         self._wp = self._w.ctypes.data_as(_P)
 
-    def __call__(self, *args: np.ndarray) -> list[np.ndarray]:
+    def __call__(self, *args: np.ndarray | float) -> list[np.ndarray]:
         for buffer, value in zip(self._inputs, args):
             if isinstance(value, (float, int)):
                 buffer[0] = value
@@ -71,7 +71,7 @@ def compile_library(name: str, functions: Sequence[ca.Function], source: str = "
     for fn in functions:
         generator.add(fn)
     text = generator.dump() + source
-    digest = hashlib.sha256((text + ca.__version__).encode()).hexdigest()[:16]
+    digest = hashlib.sha256((text + ca.CasadiMeta.version()).encode()).hexdigest()[:16]
     target = cache_dir() / f"{name}_{digest}.so"
     if not target.exists():
         target.parent.mkdir(parents=True, exist_ok=True)

@@ -179,12 +179,13 @@ def maneuver_profile(vehicle: VehicleParams, mu: float, speeds: Sequence[float] 
     chunk = ca.Function("ymax_chunk", [s, vs, qs], [x, ca.vertcat(xdot[3], _lateral_acceleration(x, xdot, vs, ca))])
     run_steps = chunk.mapaccum("ymax_steps", n_chunks, [0], [0])
     s0, v0, q0 = ca.MX.sym("s0", 4), ca.MX.sym("v0"), ca.MX.sym("q0", 9)
-    states, rates = run_steps(s0, ca.repmat(v0, 1, n_chunks), ca.repmat(q0, 1, n_chunks))
-    run = ca.Function("ymax_run", [s0, v0, q0], [states, rates]).map("ymax_map", "serial", v.size, [2], [])
+    states_sym, rates_sym = run_steps(s0, ca.repmat(v0, 1, n_chunks), ca.repmat(q0, 1, n_chunks))
+    run = ca.Function("ymax_run", [s0, v0, q0], [states_sym, rates_sym]).map("ymax_map", "serial", v.size, [2], [])
     q_value = np.array(_coefficients(vehicle, mu) + (sgn * vehicle.delta_max,))
     # the map concatenates the speeds' (rows × n_chunks) blocks horizontally
     states, rates = (np.asarray(a).reshape(-1, v.size, n_chunks) for a in run(state, v.reshape(1, -1), q_value))
-    ys, vYs, aYs, thetas = (np.vstack([a, np.zeros((n_chunks, v.size))]) for a in (prof.y, prof.vY, prof.aY, prof.theta))
+    ys, vYs, aYs, thetas = (np.vstack([a, np.zeros((n_chunks, v.size))])
+                            for a in (prof.y, prof.vY, prof.aY, prof.theta))
     ys[head + 1:] = states[3].T
     thetas[head + 1:] = states[2].T
     vYs[head + 1:] = rates[0].T

@@ -44,7 +44,8 @@ def summarize(result: SimulationResult) -> dict[str, Any]:
     t_detect = first.t if first is not None else None
     solves = [r.mpc for r in result.planning if r.mpc is not None]
     solve_ms = np.array([s.solve_time_s * 1e3 for s in solves])
-    threatened = [r.blend.weight_mpc for r in result.planning if r.threat is not None and np.isfinite(r.blend.weight_mpc)]
+    threatened = [r.blend.weight_mpc for r in result.planning
+                  if r.threat is not None and np.isfinite(r.blend.weight_mpc)]
     t, x, y, delta = trace["t"], trace["x"], trace["y"], trace["delta"]
     finite = np.isfinite(x) & np.isfinite(y)
     summary: dict[str, Any] = {

@@ -50,7 +50,7 @@ import numpy as np
 from .maneuver import MaxSteeringTable
 from .planning import zoh_rollout
 from .schema import MsfParams, PlanningGrid
-from .signals import Obstacle, PlannerInput, PlanResult
+from .signals import Obstacle, PlannerInput, PlanResult, PlanStatus
 
 
 def _quintic(left: tuple[float, float, float], right: tuple[float, float, float], length: float,
@@ -130,13 +130,13 @@ class MsfPlanner:
         tau = max(tau, 0.0)
         swing = 2.0 * self.table.t_lock
         arrive = p.reach_fraction * tau
-        half = y(0.5 * arrive, v)
+        half = float(y(0.5 * arrive, v))
         kappa = target / (2.0 * half) if half > 1e-9 else math.inf
         if kappa <= 1.0:
             return Evasion(obstacle, t0, v, kappa, 0.5 * arrive, target, kappa * swing)
 
         def at_tau(s1: float) -> float:  # the reference at τ for κ = 1 and the counter-steer from s1
-            return self.evasion_reference(tau, Evasion(obstacle, t0, v, 1.0, s1, 2.0 * y(s1, v), swing))[0]
+            return self.evasion_reference(tau, Evasion(obstacle, t0, v, 1.0, s1, 2.0 * float(y(s1, v)), swing))[0]
 
         # past half a turn y_max falls again: the counter-steer starts by its peak at the latest
         profile = np.asarray(y(self.table.t, v))
@@ -149,7 +149,7 @@ class MsfPlanner:
                 mid = 0.5 * (lo + hi)
                 lo, hi = (mid, hi) if at_tau(mid) < target else (lo, mid)
             s1 = hi
-        return Evasion(obstacle, t0, v, 1.0, s1, 2.0 * y(s1, v), swing)
+        return Evasion(obstacle, t0, v, 1.0, s1, 2.0 * float(y(s1, v)), swing)
 
     def evasion_reference(self, s: float, e: Evasion) -> tuple[float, float, float]:
         """(ỹ_ref, ẏ_ref, mean ÿ_ref over the coming step) ``s`` seconds after detection.
@@ -167,10 +167,10 @@ class MsfPlanner:
             if u <= 0.0:
                 return 0.0, 0.0, 0.0
             if u <= e.s1:
-                return k * y(u, e.vx), k * yd(u, e.vx), k * ydd(u, e.vx)
+                return k * float(y(u, e.vx)), k * float(yd(u, e.vx)), k * float(ydd(u, e.vx))
             if u < 2.0 * e.s1:
                 m = 2.0 * e.s1 - u
-                return e.target - k * y(m, e.vx), k * yd(m, e.vx), -k * ydd(m, e.vx)
+                return e.target - k * float(y(m, e.vx)), k * float(yd(m, e.vx)), -k * float(ydd(m, e.vx))
             return e.target, 0.0, 0.0
 
         def position(u: float) -> tuple[float, float]:
@@ -250,6 +250,6 @@ class MsfPlanner:
             vX += ts * a_lon
             vY += ts * a_lat
         predicted = zoh_rollout(state, accel, ts)
-        status = "ok" if evasion is not None else "idle"
+        status: PlanStatus = "ok" if evasion is not None else "idle"
         return PlanResult(accel=accel, status=status, iterations=0, solve_time_s=time.perf_counter() - start,
                           cost=0.0, predicted=predicted)

@@ -15,11 +15,14 @@ import dataclasses
 import math
 import typing
 from pathlib import Path
-from typing import Any, Mapping, TypeVar
+from typing import TYPE_CHECKING, Any, Callable, Mapping, TypeVar
 
 import yaml
 
-T = TypeVar("T")
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
+D = TypeVar("D", bound="DataclassInstance")
 
 G = 9.81
 """Gravitational acceleration (m/s^2)."""
@@ -41,7 +44,12 @@ def unit_interval(value: float) -> bool:
     return 0.0 <= value <= 1.0
 
 
-def check(name: str, value: Any, predicate: typing.Callable[[Any], bool], what: str) -> None:
+def at_most(limit: float) -> Callable[[float], bool]:
+    """The predicate ``value <= limit``."""
+    return lambda value: value <= limit
+
+
+def check(name: str, value: Any, predicate: Callable[[Any], bool], what: str) -> None:
     """Raise :class:`ParamError` unless ``predicate(value)``; ``what`` says what was expected."""
     if not predicate(value):
         raise ParamError(f"{name} = {value!r} is invalid: expected {what}")
@@ -128,7 +136,7 @@ class VehicleParams:
             check(f"vehicle.{f.name}", getattr(self, f.name), positive, "a positive number")
         for f in dataclasses.fields(VehicleLimits):
             limit = getattr(VEHICLE_LIMITS, f.name)
-            check(f"vehicle.{f.name}", getattr(self, f.name), lambda v, limit=limit: v <= limit,
+            check(f"vehicle.{f.name}", getattr(self, f.name), at_most(limit),
                   f"at most the vehicle's hard limit {limit:g} (configuration can only tighten it)")
 
     @property
@@ -198,19 +206,19 @@ def _coerce(name: str, value: Any, hint: Any) -> Any:
             return tuple(_coerce(f"{name}[{i}]", v, a) for i, (v, a) in enumerate(zip(value, args)))
         items = [_coerce(f"{name}[{i}]", v, item) if item is not Any else v for i, v in enumerate(value)]
         return tuple(items) if origin is tuple else items
-    if dataclasses.is_dataclass(hint):
+    if isinstance(hint, type) and dataclasses.is_dataclass(hint):
         if not isinstance(value, Mapping):
             raise ParamError(f"{name} = {value!r} is invalid: expected a mapping")
         return build(hint, value, name)
     if origin is typing.Union:
-        args = [a for a in typing.get_args(hint) if a is not type(None)]
+        members = [a for a in typing.get_args(hint) if a is not type(None)]
         if value is None:
             return None
-        return _coerce(name, value, args[0])
+        return _coerce(name, value, members[0])
     return value
 
 
-def build(cls: type[T], mapping: Mapping[str, Any] | None, where: str) -> T:
+def build(cls: type[D], mapping: Mapping[str, Any] | None, where: str) -> D:
     """Instantiate dataclass ``cls`` from ``mapping``, strictly.
 
     Missing keys take the dataclass default (a missing key without one is a :class:`ParamError` naming it);
@@ -244,9 +252,9 @@ def build(cls: type[T], mapping: Mapping[str, Any] | None, where: str) -> T:
         raise ParamError(message) from None
 
 
-def replace(obj: T, **changes: Any) -> T:
+def replace(obj: D, **changes: Any) -> D:
     """``dataclasses.replace`` that keeps the validation of ``__post_init__``."""
-    return dataclasses.replace(obj, **changes)  # type: ignore[type-var]
+    return dataclasses.replace(obj, **changes)
 
 
 def to_mapping(obj: Any) -> dict[str, Any]:

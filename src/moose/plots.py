@@ -7,11 +7,11 @@ from typing import Sequence
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-from matplotlib.patches import Rectangle  # noqa: E402
+import matplotlib.pyplot as plt
+from matplotlib.patches import Rectangle
 
-from .simulation import SimulationResult  # noqa: E402
-from .verdict import judge  # noqa: E402
+from .simulation import SimulationResult
+from .verdict import judge
 
 OUTCOME_COLOUR = {"clear": "tab:green", "incomplete": "tab:gray", "stopped_short": "tab:orange"}
 """Colour of an outcome's label in the figure (failures red)."""

@@ -3,11 +3,12 @@
 min f(u, p) s.t. lb ≤ u ≤ ub (Bertsekas 1982): exact Hessian on the variables off
 their bounds, regularised in proportion to the distance from stationarity and made
 positive definite by a sufficient multiple of the identity (Nocedal & Wright,
-Alg. 3.3), Armijo backtracking along the projection arc.  The cost is a CasADi function; its gradient and Hessian come from CasADi's
-automatic differentiation, and the iteration itself (``projected_newton.c``) is
-compiled together with the generated C of the cost and its derivatives into one
-shared object (``ccompile``), so one solve is one C call.  The algorithm and the
-way evaluations are counted are stated at the top of ``projected_newton.c``.
+Alg. 3.3), Armijo backtracking along the projection arc.  The cost is a CasADi
+function; its gradient and Hessian come from CasADi's automatic differentiation,
+and the iteration itself (``projected_newton.c``) is compiled together with the
+generated C of the cost and its derivatives into one shared object (``ccompile``),
+so one solve is one C call.  The algorithm and the way evaluations are counted are
+stated at the top of ``projected_newton.c``.
 
 This is the MPC planner's solver (``mpc.solver = projected_newton``): the paper's
 problem, eq. (planmpc), has only the input bounds as constraints, and a general
@@ -155,7 +156,8 @@ class ProjectedNewton:
 
     def set_bounds(self, lb: np.ndarray | float, ub: np.ndarray | float) -> None:
         """The box [lb, ub] of the following solves."""
-        lb, ub = np.broadcast_to(np.asarray(lb, dtype=float), self.n), np.broadcast_to(np.asarray(ub, dtype=float), self.n)
+        lb = np.broadcast_to(np.asarray(lb, dtype=float), self.n)
+        ub = np.broadcast_to(np.asarray(ub, dtype=float), self.n)
         if np.any(~(lb <= ub)):
             raise ValueError(f"bounds: lb > ub (or NaN) at {np.flatnonzero(~(lb <= ub)).tolist()}")
         self._lb[:] = lb

@@ -13,12 +13,12 @@ from __future__ import annotations
 import dataclasses
 import re
 from pathlib import Path
-from typing import Any, Callable, Iterable, Optional, Sequence
+from typing import Any, Callable, Iterable, Literal, Optional, Sequence, Union
 
 from .metrics import summarize
 from .paper import PAPER_FRICTION
 from .scenario import load_scenario
-from .schema import Config
+from .schema import Config, PlannerMode, SolverName
 from .simulation import simulate
 
 NINE = ("paper_v5_tau5", "paper_v5_tau4", "paper_v5_tau3", "paper_v6_w2.0", "paper_v6_w2.4", "paper_v6_w3.2",
@@ -30,9 +30,10 @@ RELAXED_5 = NINE[:3]
 SIX = NINE[3:6]
 SEVEN = NINE[6:]
 EXTREME = "paper_v7_tau1.4"
-PAPER_SOLVER = "paper_sqp"
+PAPER_SOLVER: SolverName = "paper_sqp"
 """The MPC solver that behaves like the paper's fmincon SQP under Table II."""
-RUNS: tuple[tuple[str, Optional[str]], ...] = (("combined", None), ("msf", None), ("mpc", PAPER_SOLVER), ("mpc", ""))
+RUNS: tuple[tuple[PlannerMode, Union[SolverName, Literal[""], None]], ...] = (
+    ("combined", None), ("msf", None), ("mpc", PAPER_SOLVER), ("mpc", ""))
 """(planner, MPC solver) of each scenario: None = the configured one; "" = the configured (fast) solver, labelled."""
 DURATION = 10.0
 """Simulated seconds after the obstacle appears: time to pass and return in every case."""
@@ -79,7 +80,8 @@ def run_all(config: Config, scenarios: Sequence[str] = NINE + COMPARISON, seed: 
             label_solver = cfg.mpc.solver if planner != "msf" else ""
             if progress is not None:
                 progress(f"{name} {planner} {label_solver}")
-            runs.append(Run(name, planner, label_solver, summarize(simulate(cfg, scenario, planner=planner, seed=seed))))
+            summary = summarize(simulate(cfg, scenario, planner=planner, seed=seed))
+            runs.append(Run(name, planner, label_solver, summary))
     return runs
 
 
@@ -119,16 +121,19 @@ def claims(runs: Sequence[Run], fast_solver: str, delta_max: float) -> list[Clai
                      "; ".join(f"{s['outcome']} {s['min_speed_mps']:.2f}–{s['max_speed_mps']:.2f} m/s" for s in ok)))
     after = [s["x_peak_steer_m"] for s in ok]
     out.append(Claim("Sec. VI-A", "5 m/s: the combined planner's maximum steering occurs after passing the obstacle",
-                     "x of max abs δ after detection beyond the zone's far edge", all(a is not None and a > 0 for a in after),
+                     "x of max abs δ after detection beyond the zone's far edge",
+                     all(a is not None and a > 0 for a in after),
                      "x − x_far = " + ", ".join(_fmt(a, 1) + " m" for a in after)))
     for solver in (PAPER_SOLVER, fast_solver):
         pairs = [(combined(n), mpc(n, solver)) for n in RELAXED_5 + SIX]
         smoother = all(c["time_at_steer_limit_s"] <= m["time_at_steer_limit_s"]
                        and c["steer_total_variation_rad"] < m["steer_total_variation_rad"] for c, m in pairs)
         out.append(Claim("Observation 1", "MPC close to the steering bounds; the combined strategy smoother",
-                         f"5 and 6 m/s, MPC {solver}: combined has less steering variation and no more time at the limit",
+                         f"5 and 6 m/s, MPC {solver}: combined has less steering variation and no more time at "
+                         "the limit",
                          smoother, "TV combined/MPC " + ", ".join(
-                             f"{c['steer_total_variation_rad']:.2f}/{m['steer_total_variation_rad']:.2f}" for c, m in pairs)))
+                             f"{c['steer_total_variation_rad']:.2f}/{m['steer_total_variation_rad']:.2f}"
+                             for c, m in pairs)))
     # 6 m/s
     for solver in (PAPER_SOLVER, fast_solver):
         rows = [(combined(n), mpc(n, solver)) for n in SIX]
@@ -136,8 +141,8 @@ def claims(runs: Sequence[Run], fast_solver: str, delta_max: float) -> list[Clai
                     for c, m in rows)
         out.append(Claim("Sec. VI-B", "6 m/s: MPC overreacts; combined avoids without an extreme steering command",
                          f"MPC {solver} reaches the steering limit, combined clear below it", holds,
-                         "; ".join(f"max abs δ {c['max_abs_steer_rad']:.2f}/{m['max_abs_steer_rad']:.2f} ({c['outcome']})"
-                                   for c, m in rows)))
+                         "; ".join(f"max abs δ {c['max_abs_steer_rad']:.2f}/{m['max_abs_steer_rad']:.2f} "
+                                   f"({c['outcome']})" for c, m in rows)))
     s = combined("paper_v6_w3.2")
     out.append(Claim("Sec. VI-B", "4.5 m/s detection: the planners increase the longitudinal velocity",
                      "combined's top speed after detection ≥ speed at detection + 0.2 m/s",
@@ -156,8 +161,10 @@ def claims(runs: Sequence[Run], fast_solver: str, delta_max: float) -> list[Clai
                          f"MPC {solver} alone: collision", m["outcome"] == "collision",
                          f"{m['outcome']}, clearance {_fmt(m['min_clearance_m'])} m"))
     out.append(Claim("Sec. VI-C", "τ = 1.4 s: the MSF's solution close to the steering limits avoids the collision",
-                     "combined clear with max abs δ ≥ 0.9 δ_max", c["outcome"] == "clear" and c["max_abs_steer_rad"] >= 0.9 * delta_max,
-                     f"{c['outcome']}, clearance {_fmt(c['min_clearance_m'])} m, max abs δ {c['max_abs_steer_rad']:.2f} rad"))
+                     "combined clear with max abs δ ≥ 0.9 δ_max",
+                     c["outcome"] == "clear" and c["max_abs_steer_rad"] >= 0.9 * delta_max,
+                     f"{c['outcome']}, clearance {_fmt(c['min_clearance_m'])} m, "
+                     f"max abs δ {c['max_abs_steer_rad']:.2f} rad"))
     out.append(Claim("Sec. IV (weight)", "τ = 1.4 s: the weight function hands the maneuver to the MSF planner",
                      "combined's mean w_MPC under the threat < 0.1", (c["mean_weight_mpc"] or 0.0) < 0.1,
                      f"mean w_MPC {_fmt(c['mean_weight_mpc'], 3)}"))
@@ -174,15 +181,16 @@ def claims(runs: Sequence[Run], fast_solver: str, delta_max: float) -> list[Clai
                     and (m["outcome"] in ("left_field", "collision", "lost_control")
                          or m["max_lateral_offset_m"] > c["max_lateral_offset_m"]) for c, m in rows)
         out.append(Claim("Fig. 8", "MPC overreacts with extreme steering; combined avoids inside the field",
-                         f"MPC {solver} at the steering limit and out further than combined (or failed); combined clear",
+                         f"MPC {solver} at the steering limit and out further than combined (or failed); "
+                         "combined clear",
                          holds, "; ".join(f"combined {c['outcome']} {_fmt(c['max_lateral_offset_m'])} m, MPC "
                                           f"{m['outcome']} {_fmt(m['max_lateral_offset_m'])} m" for c, m in rows)))
     return out
 
 
 RESULT_COLUMNS = ("scenario", "planner", "ν paper / here", "τ (s)", "outcome", "clearance (m)", "max abs β (rad)",
-                  "max abs y (m)", "final y (m)", "TV δ (rad)", "t at limit (s)", "max δ̇ (rad/s)", "peak δ at x − x_far (m)",
-                  "v range (m/s)", "mean w_MPC")
+                  "max abs y (m)", "final y (m)", "TV δ (rad)", "t at limit (s)", "max δ̇ (rad/s)",
+                  "peak δ at x − x_far (m)", "v range (m/s)", "mean w_MPC")
 
 
 def render_results(runs: Sequence[Run]) -> str:
@@ -193,8 +201,8 @@ def render_results(runs: Sequence[Run]) -> str:
         lines.append("| " + " | ".join([
             r.scenario, r.label, f"{_fmt(s['paper_nu'])} / {_fmt(s['nu'])}", _fmt(s["tau_s"]), s["outcome"],
             _fmt(s["min_clearance_m"]), _fmt(s["max_abs_sideslip_rad"]), _fmt(s["max_lateral_offset_m"]),
-            _fmt(s["final_lateral_offset_m"]), _fmt(s["steer_total_variation_rad"]), _fmt(s["time_at_steer_limit_s"], 1),
-            _fmt(s["peak_steer_rate_rad_s"]), _fmt(s["x_peak_steer_m"], 1),
+            _fmt(s["final_lateral_offset_m"]), _fmt(s["steer_total_variation_rad"]),
+            _fmt(s["time_at_steer_limit_s"], 1), _fmt(s["peak_steer_rate_rad_s"]), _fmt(s["x_peak_steer_m"], 1),
             f"{_fmt(s['min_speed_mps'])}–{_fmt(s['max_speed_mps'])}", _fmt(s["mean_weight_mpc"]),
         ]) + " |")
     return "\n".join(lines)
@@ -204,7 +212,8 @@ def render_claims(found: Sequence[Claim]) -> str:
     """The claims table (markdown)."""
     lines = ["| where | the paper | criterion here | verdict | numbers |", "|---|---|---|---|---|"]
     for c in found:
-        lines.append(f"| {c.where} | {c.paper} | {c.criterion} | {'holds' if c.holds else '**contradicted**'} | {c.evidence} |")
+        verdict = "holds" if c.holds else "**contradicted**"
+        lines.append(f"| {c.where} | {c.paper} | {c.criterion} | {verdict} | {c.evidence} |")
     return "\n".join(lines)
 
 
@@ -221,12 +230,13 @@ def render_summary(runs: Sequence[Run], found: Sequence[Claim]) -> str:
         lines.append(f"- **{label}**: {text} (of {len(scenarios)} scenarios).")
     if any(r.scenario == EXTREME for r in runs):
         c = _pick(runs, EXTREME, "combined").summary
-        lines.append(f"- Extreme case ({EXTREME}: τ = {c['tau_s']:.2f} s, ν = {c['nu']:.2f} here, {c['paper_nu']:.2f} in "
-                     f"the paper), combined: {c['outcome']}, clearance {_fmt(c['min_clearance_m'])} m, max abs δ "
-                     f"{c['max_abs_steer_rad']:.2f} rad, max abs β {c['max_abs_sideslip_rad']:.2f} rad, mean w_MPC "
-                     f"{_fmt(c['mean_weight_mpc'])}; the MPC alone: " + ", ".join(
-                         f"{r.summary['outcome']} ({r.solver})" for r in runs if r.scenario == EXTREME and r.planner == "mpc")
-                     + " (the paper: a collision).")
+        alone = ", ".join(f"{r.summary['outcome']} ({r.solver})" for r in runs
+                          if r.scenario == EXTREME and r.planner == "mpc")
+        lines.append(f"- Extreme case ({EXTREME}: τ = {c['tau_s']:.2f} s, ν = {c['nu']:.2f} here, "
+                     f"{c['paper_nu']:.2f} in the paper), combined: {c['outcome']}, clearance "
+                     f"{_fmt(c['min_clearance_m'])} m, max abs δ {c['max_abs_steer_rad']:.2f} rad, max abs β "
+                     f"{c['max_abs_sideslip_rad']:.2f} rad, mean w_MPC {_fmt(c['mean_weight_mpc'])}; the MPC alone: "
+                     f"{alone} (the paper: a collision).")
     shares = [r.summary["mean_weight_mpc"] or 0.0 for r in runs
               if r.label == "combined" and r.scenario in RELAXED_5 + SIX]
     if shares:
@@ -252,7 +262,8 @@ def render_calibration(vehicle: Any) -> str:
     for mu in CALIBRATION_MU:
         e = calibration_errors(vehicle, mu)
         label = f"**{mu:.2f}** (`PAPER_FRICTION`)" if mu == PAPER_FRICTION else f"{mu:.2f}"
-        lines.append(f"| {label} | {e.fit_rms:.2f} | {e.nu_rms:.3f} | " + " ".join(f"{n:.2f}".lstrip("0") for n in e.nu) + " |")
+        nus = " ".join(f"{n:.2f}".lstrip("0") for n in e.nu)
+        lines.append(f"| {label} | {e.fit_rms:.2f} | {e.nu_rms:.3f} | {nus} |")
     return "\n".join(lines)
 
 
@@ -273,5 +284,9 @@ def update_document(path: Path, blocks: dict[str, str]) -> None:
         pattern = _pattern(name)
         if not pattern.search(text):
             raise ValueError(f"{path}: no '<!-- BEGIN {name} -->' ... '<!-- END {name} -->' block")
-        text = pattern.sub(lambda m: m.group(1) + body.rstrip("\n") + "\n" + m.group(2), text)
+
+        def fill(m: re.Match[str], body: str = body) -> str:
+            return m.group(1) + body.rstrip("\n") + "\n" + m.group(2)
+
+        text = pattern.sub(fill, text)
     path.write_text(text, encoding="utf-8")

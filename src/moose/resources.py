@@ -5,12 +5,21 @@ checkout does: the default parameter file, the scenarios and the vehicle bus's D
 """
 from __future__ import annotations
 
-import os
 from importlib.resources import files
 from pathlib import Path
 
-DATA_DIR = Path(os.fspath(files("moose").joinpath("data")))
-"""The package's data folder (pip installs packages unzipped, so it is a real folder)."""
+
+def package_folder(package: str, name: str) -> Path:
+    """The folder ``name`` inside the installed ``package`` (pip installs packages unzipped, so it is a
+    real folder; a zipped import is refused)."""
+    folder = files(package).joinpath(name)
+    if not isinstance(folder, Path):
+        raise RuntimeError(f"{package} is imported from an archive ({folder}): install it with pip")
+    return folder
+
+
+DATA_DIR = package_folder("moose", "data")
+"""The package's data folder."""
 PARAMETER_FILE = DATA_DIR / "moose.yaml"
 """The default ROS 2 parameter file."""
 SCENARIO_DIR = DATA_DIR / "scenarios"

@@ -18,12 +18,11 @@ from typing import Any, Optional
 
 import yaml
 
-from .params import ParamError, build, check, non_negative, positive, replace
 from .paper import PAPER_FRICTION
+from .params import ParamError, build, check, non_negative, positive, replace
 from .resources import SCENARIO_DIR
 from .schema import Config
 from .signals import Obstacle as Box
-
 
 PAPER_FIELD = Box(-50.0, 150.0, -5.0, 10.0)
 """The drivable field by default: the plotted extent of the paper's result figures (m)."""

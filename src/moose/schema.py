@@ -22,8 +22,7 @@ import math
 import numbers
 from typing import Literal
 
-from .params import (ParamError, VehicleParams, check, non_negative, positive, replace,
-                     unit_interval)
+from .params import ParamError, VehicleParams, check, non_negative, positive, replace, unit_interval
 
 
 def _positive_finite(value: object) -> bool:
@@ -179,7 +178,8 @@ class MpcParams:
         check("qpsol", self.qpsol, lambda v: v in ("qrqp", "qpoases"), "qrqp or qpoases")
         check("speed_floor", self.speed_floor, lambda v: v in ("penalty", "constraint"), "penalty or constraint")
         check("speed_floor", self.speed_floor,
-              lambda v: v == "penalty" or self.solver == "ipopt" or (self.solver.startswith("sqp") and self.qpsol == "qpoases"),
+              lambda v: v == "penalty" or self.solver == "ipopt"
+              or (self.solver.startswith("sqp") and self.qpsol == "qpoases"),
               "penalty with projected_newton or paper_sqp (bounds only) or with qrqp (qrqp stalls on the linear "
               "speed constraints: 220 ms measured); constraint needs an sqp solver with qpsol = qpoases, or "
               "solver = ipopt")

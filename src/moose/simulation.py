@@ -4,10 +4,11 @@ Rates (``SimulationParams``): the plant is integrated at 1 kHz; sensors,
 observer, detector and motion control run at 100 Hz (GPS at 1 Hz with its lag);
 MPC, MSF, the weight function and the FBL run every t_s = 0.2 s (5 Hz, the
 MicroLabBox's rate; :class:`moose.planning.PlanningStep`), and re-plan at once
-when the detector reports a new obstacle (the planning period restarts there).  Each planning instant uses the estimate of that instant and its result acts
-from that motion tick on (zero compute latency in lockstep; the node graph has
-the real one).  All randomness comes from one seeded generator, so a run is
-a function of (configuration, scenario, planner mode, seed) — except a planning
+when the detector reports a new obstacle (the planning period restarts there).
+Each planning instant uses the estimate of that instant and its result acts from
+that motion tick on (zero compute latency in lockstep; the node graph has the
+real one).  All randomness comes from one seeded generator, so a run is a
+function of (configuration, scenario, planner mode, seed) — except a planning
 step whose wall-clock solve time exceeds the MPC's time budget, which is then
 reported ``over_budget``.
 """

@@ -36,6 +36,6 @@ def inverse_lateral(force: Any, mu_fz: float, B: float, C: float) -> Any:
     if isinstance(force, (float, int)):
         ratio = min(max(force / mu_fz, -1.0), 1.0)
         return math.tan(math.asin(ratio) / C) / B
-    ratio = np.clip(np.asarray(force, dtype=float) / mu_fz, -1.0, 1.0)
-    alpha = np.tan(np.arcsin(ratio) / C) / B
+    ratios = np.clip(np.asarray(force, dtype=float) / mu_fz, -1.0, 1.0)
+    alpha = np.tan(np.arcsin(ratios) / C) / B
     return alpha if np.ndim(alpha) else float(alpha)

@@ -35,6 +35,7 @@ from .signals import Obstacle
 
 Outcome = Literal["clear", "collision", "left_field", "lost_control", "stopped_short", "incomplete"]
 OUTCOMES: tuple[Outcome, ...] = ("clear", "collision", "left_field", "lost_control", "stopped_short", "incomplete")
+DEFAULT_PARAMS = VerdictParams()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -100,7 +101,7 @@ def _coverage(t: np.ndarray, end_time: float, max_gap: float) -> Optional[str]:
 
 
 def judge(t: np.ndarray, x: np.ndarray, y: np.ndarray, theta: np.ndarray, vx: np.ndarray, vy: np.ndarray,
-          zone: Obstacle, field: Obstacle, end_time: float, params: VerdictParams = VerdictParams()) -> Verdict:
+          zone: Obstacle, field: Obstacle, end_time: float, params: VerdictParams = DEFAULT_PARAMS) -> Verdict:
     """The verdict of one run from the sampled true state (arrays of equal length, ``t`` increasing).
 
     ``vx``, ``vy`` are body-frame velocities (``base_link``), ``theta`` the yaw in ``odom``.

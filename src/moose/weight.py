@@ -40,7 +40,6 @@ from .fbl import FeedbackLinearization
 from .schema import WeightParams
 from .signals import Blend, PlanResult, StateEstimate, Threat
 
-
 STATUS_FACTOR = {"converged": 1.0}
 """S(status) for statuses other than ``capped`` (which uses ``capped_factor``); every other status gives 0."""
 

@@ -43,7 +43,8 @@ setup(
     entry_points={
         "console_scripts": [f"{node} = {PACKAGE}.nodes:{node}_main" for node in NODES],
         # plugins of the `moose` command (moose.cli.plugins)
-        "moose.commands": [f"{command} = {PACKAGE}.cli.{command}:add_subparser" for command in ("node", "launch", "bag")],
+        "moose.commands": [f"{command} = {PACKAGE}.cli.{command}:add_subparser"
+                           for command in ("node", "launch", "bag")],
         "moose.recorders": [f"bag = {PACKAGE}.bag.record:record_simulation"],
     },
 )

@@ -44,6 +44,8 @@ LIMIT_SIGNALS = {("CMD_STEER", "SteerAngleCmd"): "delta_max", ("CMD_STEER", "Ste
                  ("CMD_TORQUE", "TorqueRL"): "torque_max", ("CMD_TORQUE", "TorqueRR"): "torque_max"}
 """Each command signal and the guard limit its range must contain."""
 _EPS = 1e-9
+DEFAULT_GUARD = GuardParams()
+DEFAULT_HEALTH = HealthParams()
 
 
 def cycle_time(db: Any, *names: str) -> float:
@@ -75,8 +77,8 @@ def check_limits_encodable(db: Any, params: GuardParams) -> None:
 class BridgeCore:
     """The bridge between the motion controller and the vehicle bus (config/kanon.dbc)."""
 
-    def __init__(self, guard: GuardParams = GuardParams(), codec: Optional[Codec] = None,
-                 health: HealthParams = HealthParams()) -> None:
+    def __init__(self, guard: GuardParams = DEFAULT_GUARD, codec: Optional[Codec] = None,
+                 health: HealthParams = DEFAULT_HEALTH) -> None:
         self.codec = codec or Codec(node="BRIDGE")
         self.command_period = cycle_time(self.codec.db, "CMD_STEER", "CMD_TORQUE")
         self.status_period = cycle_time(self.codec.db, "BRIDGE_HEARTBEAT", "BRIDGE_STATUS")

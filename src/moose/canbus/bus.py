@@ -5,11 +5,12 @@ machine), ``virtual`` (in-process tests).
 
 ``udp_multicast`` is python-can's UDP multicast bus (same datagrams, msgpack-encoded
 frames) confined to the loopback interface: IPv4 multicast with TTL 0, outgoing
-interface ``lo`` (IP_MULTICAST_IF 127.0.0.1) and the group joined on ``lo`` only — python-can's own bus joins on the default interface, which sends IGMP
-membership reports onto the network even with TTL 0.  A datagram that is not a frame is
-skipped and counted (python-can would raise), so a stray sender cannot fail the bus.
-IPv6 groups are refused: ``lo`` has no IPv6 multicast route (sending fails with "network
-is unreachable").
+interface ``lo`` (IP_MULTICAST_IF 127.0.0.1) and the group joined on ``lo`` only —
+python-can's own bus joins on the default interface, which sends IGMP membership reports
+onto the network even with TTL 0.  A datagram that is not a frame is skipped and counted
+(python-can would raise), so a stray sender cannot fail the bus.  IPv6 groups are
+refused: ``lo`` has no IPv6 multicast route (sending fails with "network is
+unreachable").
 """
 from __future__ import annotations
 
@@ -66,7 +67,8 @@ class _LoopbackMulticast(GeneralPurposeUdpMulticastBus):
             return sock
         except OSError as error:
             sock.close()
-            raise can.CanInitializationError(f"could not open multicast group {self.group} on {LOOPBACK}: {error}") from error
+            raise can.CanInitializationError(
+                f"could not open multicast group {self.group} on {LOOPBACK}: {error}") from error
 
 
 class LoopbackMulticastBus(UdpMulticastBus):
@@ -74,7 +76,8 @@ class LoopbackMulticastBus(UdpMulticastBus):
 
     def __init__(self, channel: str = DEFAULT_GROUP, port: int = DEFAULT_PORT, **kwargs: Any) -> None:
         is_msgpack_installed()
-        can.BusABC.__init__(self, channel, **kwargs)  # not UdpMulticastBus.__init__: it would join on the default interface
+        # not UdpMulticastBus.__init__: it would join on the default interface
+        can.BusABC.__init__(self, channel, **kwargs)
         self._multicast = _LoopbackMulticast(channel, int(port), 0)
         self._can_protocol = can.CanProtocol.CAN_20
         self.channel_info = f"udp_multicast {channel}:{port} on {LOOPBACK}"

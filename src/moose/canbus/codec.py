@@ -81,8 +81,8 @@ class FrameStats:
 
     @property
     def dropped(self) -> int:
-        return (self.unknown_id + self.own_id + self.bad_length + self.bad_checksum + self.bad_counter + self.undecodable
-                + self.out_of_range)
+        return (self.unknown_id + self.own_id + self.bad_length + self.bad_checksum + self.bad_counter
+                + self.undecodable + self.out_of_range)
 
     def snapshot(self) -> dict[str, int]:
         return dataclasses.asdict(self)
@@ -99,7 +99,8 @@ class Codec:
     _tx_counter: dict[str, int] = field(default_factory=dict)
     _rx_counter: dict[int, int] = field(default_factory=dict)
 
-    def encode(self, name: str, values: dict[str, float], timestamp: float = 0.0, saturate: bool = False) -> can.Message:
+    def encode(self, name: str, values: dict[str, float], timestamp: float = 0.0,
+               saturate: bool = False) -> can.Message:
         """The frame ``name`` with ``values`` (counter and checksum added).
 
         Values outside a signal's DBC range raise, unless ``saturate`` (a sensor at full

@@ -172,7 +172,8 @@ class BusHealth:
         self._backoff = min(2.0 * self._backoff, self.params.backoff_max)
 
     def reopen_due(self, t: float) -> bool:
-        return self.state == BusState.IO_FAILURE and t >= (self._reopen_at if self._reopen_at is not None else -math.inf)
+        reopen_at = self._reopen_at if self._reopen_at is not None else -math.inf
+        return self.state == BusState.IO_FAILURE and t >= reopen_at
 
     @property
     def reopen_at(self) -> Optional[float]:

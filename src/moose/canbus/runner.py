@@ -195,7 +195,8 @@ class BridgeRunner:
             if self.sender_error is not None:
                 return BridgeDiagnostics(ERROR, f"command sender stopped: {self.sender_error}", values)
             if health.state == BusState.IO_FAILURE:
-                return BridgeDiagnostics(ERROR, f"bus error: {health.last_error}; re-opening after the back-off", values)
+                return BridgeDiagnostics(ERROR, f"bus error: {health.last_error}; re-opening after the back-off",
+                                         values)
             if core.bus_error:
                 return BridgeDiagnostics(ERROR, f"bus error: {health.last_error or health.state.name.lower()}", values)
             problems = [self.realtime_error] if self.realtime_error else []
@@ -271,7 +272,7 @@ class BridgeRunner:
                 deadline = now + period
 
 
-def open_log(path: str) -> can.Logger:
+def open_log(path: str) -> can.io.generic.MessageWriter:
     """python-can's Logger for ``path`` (its suffix picks the format); ParamError naming a bad path."""
     try:
         return can.Logger(str(path))

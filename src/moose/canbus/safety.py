@@ -1,4 +1,5 @@
-"""The bridge's command guard: nothing outside the vehicle's limits reaches the car, and a silent controller ends in a stop.
+"""The bridge's command guard: nothing outside the vehicle's limits reaches the car, and a silent
+controller ends in a stop.
 
 **Limits.**  Whatever arrives on the command topic, every output of
 :meth:`CommandGuard.output` (one per command frame, period T_cmd) satisfies
@@ -39,10 +40,10 @@ import dataclasses
 import enum
 import math
 import numbers
-from typing import Optional
+from typing import Any, Optional
 
 from moose.minimum_risk import ActuatorLimits, Command, MinimumRiskManeuver
-from moose.params import VEHICLE_LIMITS, ParamError, check
+from moose.params import VEHICLE_LIMITS, ParamError, VehicleParams, at_most, check
 from moose.schema import MinimumRiskParams
 
 from .ecu import ECU_TIMEOUT
@@ -88,7 +89,7 @@ class GuardParams:
         check("maneuver", self.maneuver, lambda v: isinstance(v, MinimumRiskParams), "a MinimumRiskParams")
         for name, limit_name in HARD_LIMIT.items():
             limit = getattr(VEHICLE_LIMITS, limit_name)
-            check(name, getattr(self, name), lambda v, limit=limit: v <= limit,
+            check(name, getattr(self, name), at_most(limit),
                   f"at most the vehicle's hard limit {limit_name} = {limit:g} (configuration can only tighten it)")
         check("timeout", self.timeout, lambda v: v <= ECU_TIMEOUT,
               f"at most the vehicle ECUs' command timeout {ECU_TIMEOUT:g} s")
@@ -104,10 +105,11 @@ class GuardParams:
         return self.maneuver.brake_fraction * self.torque_max
 
     @classmethod
-    def from_vehicle(cls, vehicle: object, **changes: object) -> "GuardParams":
-        """The limits of ``vehicle`` (a :class:`~moose.params.VehicleParams`); other fields from ``changes`` or the defaults."""
+    def from_vehicle(cls, vehicle: VehicleParams, **changes: Any) -> "GuardParams":
+        """The limits of ``vehicle`` (a :class:`~moose.params.VehicleParams`); other fields from ``changes`` or
+        the defaults."""
         limits = {name: getattr(vehicle, limit_name) for name, limit_name in HARD_LIMIT.items()}
-        return cls(**limits, **changes)  # type: ignore[arg-type]
+        return cls(**limits, **changes)
 
 
 class GuardState(str, enum.Enum):
@@ -179,7 +181,8 @@ class CommandGuard:
         self._command = _Arrival(self._cycle)
 
     def observe_angle(self, delta: float) -> None:
-        """The steering angle the EPS measured (EPS_STATUS): end stops, steering back, and the angle to hold when idle."""
+        """The steering angle the EPS measured (EPS_STATUS): end stops, steering back, and the angle to hold
+        when idle."""
         if not _finite(delta):
             return
         self._angle = (_Arrival(self._cycle), float(delta))

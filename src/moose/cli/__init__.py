@@ -2,10 +2,11 @@
 
 Built in: ``simulate`` (one moose test in lockstep, :mod:`.simulate`), ``reproduce`` (the
 paper's cases and claims, :mod:`.reproduce`), ``sweep`` (many moose tests and their maps,
-:mod:`.sweep`) and ``can`` (vehicle-bus tools, :mod:`.can`).  Other packages add commands through entry points (:mod:`.plugins`); the
-node graph's ``node``, ``launch`` and ``bag`` come with moose_ros.  Bad input ends with
-``moose: error: …`` naming the field and the value, and exit status 2; Ctrl-C with 130
-(:mod:`moose.cli.common` lists every exit status).
+:mod:`.sweep`) and ``can`` (vehicle-bus tools, :mod:`.can`).  Other packages add commands
+through entry points (:mod:`.plugins`); the node graph's ``node``, ``launch`` and ``bag``
+come with moose_ros.  Bad input ends with ``moose: error: …`` naming the field and the
+value, and exit status 2; Ctrl-C with 130 (:mod:`moose.cli.common` lists every exit
+status).
 """
 from __future__ import annotations
 

@@ -20,9 +20,10 @@ def add_subparser(subparsers: Any) -> None:
     can_replay.add_argument("--rate", type=positive_float, default=1.0)
     for parser_ in (can_dump, can_replay):
         parser_.add_argument("--interface", default="udp_multicast", help="socketcan, udp_multicast or virtual")
-        parser_.add_argument("--channel", help="multicast group or socketcan device "
-                                               "(default: the udp_multicast bus's group, moose.canbus.bus.DEFAULT_GROUP)")
-        parser_.add_argument("--port", type=int, help="UDP port of udp_multicast (default: moose.canbus.bus.DEFAULT_PORT)")
+        parser_.add_argument("--channel", help="multicast group or socketcan device (default: the "
+                                               "udp_multicast bus's group, moose.canbus.bus.DEFAULT_GROUP)")
+        parser_.add_argument("--port", type=int,
+                             help="UDP port of udp_multicast (default: moose.canbus.bus.DEFAULT_PORT)")
         parser_.set_defaults(func=cmd_can)
 
 

@@ -33,7 +33,14 @@ GENERATED = ("calibration", "results", "claims", "summary")
 def cmd_reproduce(args: argparse.Namespace) -> int:
     from ..config import load_config
     from ..reproduce import (
-        blocks_in, claims, render_calibration, render_claims, render_results, render_summary, run_all, update_document,
+        blocks_in,
+        claims,
+        render_calibration,
+        render_claims,
+        render_results,
+        render_summary,
+        run_all,
+        update_document,
     )
 
     writes = [Path(p) for p in args.write or []]

@@ -17,8 +17,15 @@ from typing import Any, Callable, Optional
 
 from ..params import ParamError
 from .common import (
-    INTERRUPTS, add_scenario_arguments, check_output_dir, check_output_file, configure, outcome_exit_status, plot_suffixes,
-    run_folder, scenario_from_args,
+    INTERRUPTS,
+    add_scenario_arguments,
+    check_output_dir,
+    check_output_file,
+    configure,
+    outcome_exit_status,
+    plot_suffixes,
+    run_folder,
+    scenario_from_args,
 )
 from .plugins import recorder
 

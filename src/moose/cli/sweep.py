@@ -33,9 +33,11 @@ def add_subparser(subparsers: Any) -> None:
     axes.add_argument("--speed", metavar="VALUES", help="speed at detection, m/s")
     axes.add_argument("--tau", metavar="VALUES", help="time to collision at which the obstacle appears, s")
     axes.add_argument("--obstacle-half-width", metavar="VALUES", help="danger-zone half width, m (or --nu)")
-    axes.add_argument("--nu", metavar="VALUES", help="target lateral steering index: half width = nu * y_max(tau, v) at the road's mu")
-    axes.add_argument("--mu", metavar="VALUES", help="road friction; 'paper' is the calibration that reproduces the paper's nu "
-                                   "(default: the configuration's vehicle.mu)")
+    axes.add_argument("--nu", metavar="VALUES",
+                      help="target lateral steering index: half width = nu * y_max(tau, v) at the road's mu")
+    axes.add_argument("--mu", metavar="VALUES",
+                      help="road friction; 'paper' is the calibration that reproduces the paper's nu "
+                           "(default: the configuration's vehicle.mu)")
     axes.add_argument("--planner", metavar="VALUES", help="combined, mpc, msf (default combined)")
     axes.add_argument("--seeds", type=int, default=1, help="sensor-noise seeds 0..N-1 (default 1)")
     axes.add_argument("--obstacle-length", metavar="VALUES", help="danger-zone length, m (default 2)")
@@ -106,7 +108,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         given = [name for name in AXIS_OPTIONS if getattr(args, name) is not None] + (["set"] if args.set else [])
         if given:
             flag = "--" + given[0].replace("_", "-")
-            raise ParamError(f"{flag} is an option of the sweep, not of 'moose sweep plot DIR' (--x, --y, --plot-output)")
+            raise ParamError(f"{flag} is an option of the sweep, not of 'moose sweep plot DIR' "
+                             "(--x, --y, --plot-output)")
         return cmd_plot(args)
     if args.x is not None or args.y is not None or args.plot_output is not None:
         raise ParamError("--x, --y and --plot-output are options of 'moose sweep plot DIR'")

@@ -12,11 +12,23 @@ from __future__ import annotations
 
 from . import newton, nlpsol, paper_sqp  # noqa: F401  (register the solvers)
 from .cost import (
-    PARAMETERS, Problem, build_problem, epsilon, j_brake, j_return, j_safe, j_stable, j_steer, kinematic_rollout,
-    kinematic_step, past_obstacle, speed_floor, y_safe,
+    PARAMETERS,
+    Problem,
+    build_problem,
+    epsilon,
+    j_brake,
+    j_return,
+    j_safe,
+    j_stable,
+    j_steer,
+    kinematic_rollout,
+    kinematic_step,
+    past_obstacle,
+    speed_floor,
+    y_safe,
 )
 from .planner import MpcPlanner, keep_speed_non_negative
-from .solver import SolveResult, SolveStatus, Solver, create, register, registered
+from .solver import Solver, SolveResult, SolveStatus, create, register, registered
 
 __all__ = [
     "MpcPlanner", "PARAMETERS", "Problem", "SolveResult", "SolveStatus", "Solver", "build_problem", "create",

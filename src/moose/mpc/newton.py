@@ -11,7 +11,7 @@ import numpy as np
 from ..projected_newton import CompilerMissing, NewtonOptions, NewtonStatus, ProjectedNewton
 from ..schema import MpcParams
 from .cost import Problem
-from .solver import SolveResult, SolveStatus, Solver, register
+from .solver import Solver, SolveResult, SolveStatus, register
 
 STATUS: dict[NewtonStatus, SolveStatus] = {
     "converged": "converged", "small_step": "converged",  # step below step_tol: fmincon's exit flag 2

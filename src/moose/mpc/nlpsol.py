@@ -15,7 +15,7 @@ import numpy as np
 
 from ..schema import MpcParams
 from .cost import Problem
-from .solver import CompiledCost, SolveResult, SolveStatus, Solver, register
+from .solver import CompiledCost, Solver, SolveResult, SolveStatus, register
 
 _CAPPED = ("Maximum_Iterations_Exceeded", "Maximum_Iterations_Reached")
 _COST_CALLS = ("n_call_nlp_f", "n_call_nlp_fg", "n_call_nlp_grad_f", "n_call_nlp_jac_fg")

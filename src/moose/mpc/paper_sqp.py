@@ -44,7 +44,7 @@ import numpy as np
 from ..params import check, positive
 from ..schema import MpcParams
 from .cost import Problem
-from .solver import CompiledCost, SolveResult, SolveStatus, Solver, register
+from .solver import CompiledCost, Solver, SolveResult, SolveStatus, register
 
 SqpReason = Literal["optimal", "small_step", "max_iter", "max_evals", "not_finite"]
 STATUS: dict[SqpReason, SolveStatus] = {
@@ -135,10 +135,10 @@ def box_qp(H: np.ndarray, g: np.ndarray, lower: np.ndarray, upper: np.ndarray,
             gradient = H @ d + g
             multipliers = np.where(at_lower, gradient, -gradient)  # ≥ 0 at the QP's minimiser
             multipliers[free] = np.inf
-            i = int(np.argmin(multipliers))
-            if multipliers[i] >= -1e-12 * (1.0 + float(np.max(np.abs(g), initial=0.0))):  # round-off
+            release = int(np.argmin(multipliers))
+            if multipliers[release] >= -1e-12 * (1.0 + float(np.max(np.abs(g), initial=0.0))):  # round-off
                 return d
-            working[i] = at_lower[i] = at_upper[i] = False
+            working[release] = at_lower[release] = at_upper[release] = False
         else:  # the first bound in the way joins the working set
             d = d + max(ratio, 0.0) * step
             on_upper = bool(step[blocking] > 0.0)

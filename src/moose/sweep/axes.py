@@ -25,6 +25,7 @@ import numpy as np
 import yaml
 
 from ..params import ParamError
+from ..schema import PlannerMode
 
 Sampling = Literal["grid", "lhs", "random"]
 
@@ -92,8 +93,8 @@ def parse_axis(name: str, text: str, label: Optional[str] = None) -> Axis:
         if count > MAX_CASES:
             raise ParamError(f"{name} = {text!r} is an invalid range: {count} values")
         integral = all(isinstance(v, int) for v in (low, high, step))
-        values = [low + k * step if integral else round(low + k * step, 12) for k in range(count)]
-        return Axis(axis_name, tuple(values))
+        grid = [low + k * step if integral else round(low + k * step, 12) for k in range(count)]
+        return Axis(axis_name, tuple(grid))
     values = tuple(_scalar(part.strip(), name) for part in text.split(","))
     if any(v == "" for v in values):
         raise ParamError(f"{name} = {text!r} is invalid: an empty value in the list")
@@ -122,7 +123,7 @@ class Case:
     """Room beside the obstacle (m), :func:`moose.scenario.adhoc_scenario`."""
     mu: float
     """The road's friction."""
-    planner: str
+    planner: PlannerMode
     seed: int
     overrides: tuple[tuple[str, Any], ...] = ()
     """``--set`` parameters, sorted by key."""

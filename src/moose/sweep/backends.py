@@ -147,7 +147,8 @@ class LocalBackend:
             return None
         worker.process.join()
         code = worker.process.exitcode
-        how = f"signal {-code} ({signal.Signals(-code).name})" if code is not None and code < 0 else f"exit status {code}"
+        how = (f"signal {-code} ({signal.Signals(-code).name})" if code is not None and code < 0
+               else f"exit status {code}")
         return failed_row(case, "crashed", f"the worker process died under this case: {how}",
                           time.monotonic() - worker.started, f"pid {worker.process.pid}")
 

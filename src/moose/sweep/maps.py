@@ -20,11 +20,14 @@ import json
 import math
 from collections import defaultdict
 from pathlib import Path
-from typing import Any, Optional, Sequence
+from typing import TYPE_CHECKING, Any, Optional, Sequence
 
 import numpy as np
 
 from ..params import ParamError
+
+if TYPE_CHECKING:
+    from matplotlib.typing import LineStyleType
 
 AXES = {
     "speed": ("input.speed_mps", "v (m/s)"), "tau": ("input.tau_s", "τ (s)"), "nu": ("input.nu", "ν (target)"),
@@ -44,7 +47,8 @@ COLOURS = {
     "stopped_short": "#8c564b", "incomplete": "#7f7f7f", "crashed": "#bcbd22", "error": "#000000",
     "timeout": "#e377c2",
 }
-PLANNER_STYLE = {"combined": ("tab:blue", "-"), "mpc": ("tab:red", "--"), "msf": ("tab:purple", ":")}
+PLANNER_STYLE: dict[str, tuple[str, LineStyleType]] = {
+    "combined": ("tab:blue", "-"), "mpc": ("tab:red", "--"), "msf": ("tab:purple", ":")}
 ADVANTAGE = (
     ("beats both", "#1f77b4"), ("beats MPC alone", "#17becf"), ("beats MSF alone", "#aec7e8"),
     ("all safe", "#d9f0d3"), ("combined worse", "#d62728"), ("none safe", "#bdbdbd"),
@@ -118,7 +122,8 @@ class Cells:
         """Axes with too many values for columns (sampled ones): their points share the panels."""
         self.xcol = _column(x)[0]
         self.ycol = _column(y)[0] if y else None
-        self.groups: dict[tuple, dict[tuple[float, float], list[dict[str, Any]]]] = defaultdict(lambda: defaultdict(list))
+        self.groups: dict[tuple, dict[tuple[float, float], list[dict[str, Any]]]] = defaultdict(
+            lambda: defaultdict(list))
         for row in rows:
             key = (row["input.mu"], row["input.planner"], self.facet_of(row))
             xy = (float(row[self.xcol]), float(row[self.ycol]) if self.ycol else 0.0)
@@ -258,7 +263,8 @@ def clearance_map(cells: Cells, facets: Sequence[tuple], path: Path) -> Path:
     mappable = None
     for i, (mu, planner) in enumerate(combos):
         for j, facet in enumerate(facets):
-            mappable = _panel(axes[i, j], cells, cells.cells(mu, planner, facet), min_clearance, "RdYlGn", norm) or mappable
+            mappable = (_panel(axes[i, j], cells, cells.cells(mu, planner, facet), min_clearance, "RdYlGn", norm)
+                        or mappable)
     _decorate(cells, axes, [f"{p}, {_mu_label(mu)}" for mu, p in combos], facets)
     if mappable is not None:
         fig.colorbar(mappable, ax=axes, shrink=0.6, label="min clearance (m, ≤ 0: collision)")
@@ -294,14 +300,15 @@ def envelope_map(cells: Cells, facets: Sequence[tuple], path: Path, paper: Seque
     handles = [Line2D([], [], color=PLANNER_STYLE.get(p, ("k", "-"))[0], linestyle=PLANNER_STYLE.get(p, ("k", "-"))[1],
                       label=f"{p}: safe-envelope boundary") for p in cells.planners]
     if paper:
-        handles.append(Line2D([], [], marker="*", color="gold", markeredgecolor="k", linestyle="", label="paper's experiment"))
+        handles.append(Line2D([], [], marker="*", color="gold", markeredgecolor="k", linestyle="",
+                              label="paper's experiment"))
     fig.legend(handles=handles, loc="outside lower center", ncol=2, fontsize=8, frameon=False)
-    fig.suptitle("safe envelope (outcome clear for every seed; pale green: the combined planner's safe cells, grey: not)",
-                 fontsize=9)
+    fig.suptitle("safe envelope (outcome clear for every seed; pale green: the combined planner's safe cells, "
+                 "grey: not)", fontsize=9)
     return _save(fig, path)
 
 
-def _boundary(ax: Any, cells: Cells, cellmap: dict, colour: str, style: str) -> None:
+def _boundary(ax: Any, cells: Cells, cellmap: dict, colour: str, style: LineStyleType) -> None:
     """The edges between a planner's safe and unsafe cells (on a grid), or the 0.5 contour of the safe
     indicator over the samples (scattered points)."""
     if cells.grid:
@@ -370,7 +377,7 @@ def paper_points(cells: Cells) -> list[dict[str, Any]]:
     from ..paper import PAPER_EXPERIMENTS, PAPER_FRICTION
 
     mus = [mu for mu in cells.mus if abs(mu - PAPER_FRICTION) < 1e-12]
-    if (not mus or {cells.x, cells.y} != {"tau", "nu"} or any(n != "speed" for n in cells.facet_axes)
+    if (not mus or cells.y is None or {cells.x, cells.y} != {"tau", "nu"} or any(n != "speed" for n in cells.facet_axes)
             or cells.projected):
         return []
     points = []
@@ -423,7 +430,8 @@ def draw_maps(folder: Path, out: Path, x: Optional[str] = None, y: Optional[str]
     chunks = [cells.facets[i:i + FACETS_PER_FIGURE] for i in range(0, len(cells.facets), FACETS_PER_FIGURE)]
     for k, facets in enumerate(chunks):
         suffix = f"_{k + 1}" if len(chunks) > 1 else ""
-        figures.append(("Safe envelope per planner", envelope_map(cells, facets, out / f"envelope{suffix}.png", points)))
+        envelope = envelope_map(cells, facets, out / f"envelope{suffix}.png", points)
+        figures.append(("Safe envelope per planner", envelope))
         advantage = advantage_map(cells, facets, out / f"advantage{suffix}.png")
         if advantage is not None:
             figures.append(("Where the combined planner beats MPC alone and MSF alone", advantage))
@@ -458,7 +466,8 @@ def write_report(path: Path, rows: Sequence[dict[str, Any]], cells: Cells, figur
                      f"<p>axes: <code>{esc(axes)}</code></p>")
     parts.append(f"<p>Panels: x = {esc(_column(cells.x)[1])}, y = {esc(_column(cells.y)[1] if cells.y else '-')}; "
                  f"columns: {esc(', '.join(cells.facet_axes) or 'one')}"
-                 + (f"; sampled axes shown in the same panels: {esc(', '.join(cells.projected))}" if cells.projected else "")
+                 + (f"; sampled axes shown in the same panels: {esc(', '.join(cells.projected))}"
+                    if cells.projected else "")
                  + ". A cell aggregates its seeds: the most severe "
                  "outcome, the smallest clearance; it is safe when every seed is <i>clear</i> (passed the obstacle "
                  "without collision and without loss of control, inside the field).</p>")
@@ -476,7 +485,7 @@ def write_report(path: Path, rows: Sequence[dict[str, Any]], cells: Cells, figur
                      + "".join(f"<th>{esc(p)}</th>" for p in cells.planners) + "</tr>")
         for p in points:
             where = cells.facet_title(p["facet"])
-            if p["nearest"] is not None:
+            if p["nearest"] is not None and cells.y is not None:
                 where += f", {_column(cells.x)[1]} = {p['nearest'][0]:g}, {_column(cells.y)[1]} = {p['nearest'][1]:g}"
             parts.append(f"<tr><td>{esc(p['experiment'])}</td><td>{esc(where)}</td>"
                          + "".join(f"<td>{esc(p['outcomes'].get(pl, '-'))}</td>" for pl in cells.planners) + "</tr>")

@@ -14,16 +14,16 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-from typing import Any, Optional
+from typing import Any, Optional, get_args
 
 from ..config import config_as_ros_params, with_overrides
 from ..paper import PAPER_FRICTION
 from ..params import ParamError, replace
-from ..schema import Config
+from ..schema import Config, PlannerMode
 from .axes import MAX_CASES, Axis, Case, Sampling, combinations
 from .case import case_scenario
 
-PLANNERS = ("combined", "mpc", "msf")
+PLANNERS: tuple[PlannerMode, ...] = get_args(PlannerMode)
 
 SCENARIO_AXES = ("speed", "tau", "half_width", "nu", "length", "duration", "field_margin", "mu", "planner", "seed")
 """Axis names of the scenario; the configuration's are ``set.<group>.<key>``."""
@@ -89,8 +89,8 @@ class SweepSpec:
         if self.samples is not None and not (isinstance(self.samples, int) and 1 <= self.samples <= MAX_CASES):
             raise ParamError(f"--samples {self.samples!r} is invalid: expected an integer in [1, {MAX_CASES}]")
         full = dict(axes)
-        for name, values in DEFAULTS.items():
-            full.setdefault(name, Axis(name, values))
+        for name, defaults in DEFAULTS.items():
+            full.setdefault(name, Axis(name, defaults))
         full.setdefault("mu", Axis("mu", (self.config.vehicle.mu,)))
         full["mu"] = _friction_axis(full["mu"])
         for axis in full.values():
@@ -100,7 +100,8 @@ class SweepSpec:
                 if isinstance(value, bool) or not isinstance(value, (int, float)):
                     raise ParamError(f"{FLAGS[axis.name]} {value!r} is invalid: expected a number")
         order = ["mu", *sorted(n for n in full if n.startswith("set.")), "speed", "tau",
-                 "half_width" if "half_width" in full else "nu", "length", "duration", "field_margin", "seed", "planner"]
+                 "half_width" if "half_width" in full else "nu", "length", "duration", "field_margin", "seed",
+                 "planner"]
         crossed = [full[n] for n in order if not full[n].sampled]
         sampled = [full[n] for n in order if full[n].sampled]
         cases: list[Case] = []
@@ -133,7 +134,7 @@ class SweepSpec:
             raise ParamError(f"seed {seed!r} is invalid: expected a non-negative integer")
         case = Case(speed=speed, tau=tau, half_width=half_width, nu=nu, length=float(values["length"]),
                     duration=float(values["duration"]), field_margin=None if margin is None else float(margin),
-                    mu=mu, planner=str(values["planner"]), seed=seed, overrides=overrides)
+                    mu=mu, planner=values["planner"], seed=seed, overrides=overrides)
         try:
             case_scenario(case)
         except ParamError as exc:

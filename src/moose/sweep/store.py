@@ -152,7 +152,7 @@ class RunFolder:
             self.path.mkdir(parents=True, exist_ok=True)
             path = self.path / JOURNAL
             cut = path.exists() and path.stat().st_size > 0 and not path.read_bytes().endswith(b"\n")
-            self._journal = open(path, "a", encoding="utf-8")
+            self._journal = open(path, "a", encoding="utf-8")  # noqa: SIM115 - kept open across cases, closed by close()
             if cut:  # a line cut short by a kill: end it, so that the next row starts a line of its own
                 self._journal.write("\n")
         self._journal.write(json.dumps(row, allow_nan=False) + "\n")

@@ -9,7 +9,8 @@ from launch_ros.substitutions import FindPackageShare
 def generate_launch_description():
     return LaunchDescription([
         IncludeLaunchDescription(
-            PythonLaunchDescriptionSource(PathJoinSubstitution([FindPackageShare("moose_ros"), "launch", "moose_graph.launch.py"])),
+            PythonLaunchDescriptionSource(
+                PathJoinSubstitution([FindPackageShare("moose_ros"), "launch", "moose_graph.launch.py"])),
             launch_arguments={"with_simulator": "false"}.items(),
         )
     ])

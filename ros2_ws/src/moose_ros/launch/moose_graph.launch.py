@@ -1,4 +1,5 @@
-"""ROS 2 launch of the moose graph: `ros2 launch moose_ros moose_graph.launch.py [group:=all|perception|planning|control|vehicle|bridge]`.
+"""ROS 2 launch of the moose graph:
+`ros2 launch moose_ros moose_graph.launch.py [group:=all|perception|planning|control|vehicle|bridge]`.
 
 Groups mirror the vehicle's ECUs (moose_ros.graph.GROUPS): perception (observer, obstacle
 detector), planning (MPC, MSF, weight function + FBL; the MicroLabBox), control (motion

@@ -15,22 +15,50 @@ and never lets it raise out of a callback.
 from __future__ import annotations
 
 import math
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Optional, Sequence, Union
 
 import numpy as np
 
 from moose.signals import (
-    ActuatorCommand, Blend, EpsSample, GpsSample, ImuSample, Obstacle, PlanResult, Reference, StateEstimate, Threat,
+    ActuatorCommand,
+    Blend,
+    EpsSample,
+    GpsSample,
+    ImuSample,
+    Obstacle,
+    PlanResult,
+    PlanStatus,
+    Reference,
+    StateEstimate,
+    Threat,
     WheelSpeedSample,
 )
 
 from .graph import (
-    ACTUATOR_COMMAND, BLEND, DIAGNOSTICS, FRAME_BASE, FRAME_GPS, FRAME_IMU, FRAME_ODOM, FRAME_TRUTH, GPS, IMU,
-    OBSTACLES, PLAN_MPC, PLAN_MSF, REFERENCE, SENSOR_MOUNTS, STAMP_TOLERANCE, STATE, STEERING, THREAT, WHEEL_SPEEDS,
+    ACTUATOR_COMMAND,
+    BLEND,
+    DIAGNOSTICS,
+    FRAME_BASE,
+    FRAME_GPS,
+    FRAME_IMU,
+    FRAME_ODOM,
+    FRAME_TRUTH,
+    GPS,
+    IMU,
+    OBSTACLES,
+    PLAN_MPC,
+    PLAN_MSF,
+    REFERENCE,
+    SENSOR_MOUNTS,
+    STAMP_TOLERANCE,
+    STATE,
+    STEERING,
+    THREAT,
+    WHEEL_SPEEDS,
     Topic,
 )
 
-STATUS_CODES = {"converged": 0, "capped": 1, "failed": 2, "over_budget": 3, "ok": 4, "idle": 5}
+STATUS_CODES: dict[PlanStatus, int] = {"converged": 0, "capped": 1, "failed": 2, "over_budget": 3, "ok": 4, "idle": 5}
 STATUS_NAMES = {code: name for name, code in STATUS_CODES.items()}
 
 
@@ -66,7 +94,8 @@ def _same_length(kind: str, first: tuple[str, np.ndarray], second: tuple[str, np
     if a.size < minimum:
         raise InvalidMessage(f"{kind}.{name_a} (length {a.size}) is invalid: expected at least {minimum} element(s)")
     if a.shape != b.shape:
-        raise InvalidMessage(f"{kind}.{name_b} (length {b.size}) is invalid: expected the length of {name_a} ({a.size})")
+        raise InvalidMessage(f"{kind}.{name_b} (length {b.size}) is invalid: "
+                             f"expected the length of {name_a} ({a.size})")
 
 
 def checked_time(msg: Any, now: Optional[float] = None) -> float:
@@ -186,8 +215,10 @@ def plan_from_msg(msg: Any) -> PlanResult:
     predicted path (positions and velocities) of equal lengths, a finite non-negative solve time, a finite
     cost (1e300 and above: none)."""
     if msg.status not in STATUS_NAMES:
-        raise InvalidMessage(f"PlannerOutput.status = {msg.status!r} is invalid: expected one of {sorted(STATUS_NAMES)}")
-    ax, ay = _finite_array("PlannerOutput", "accel_x", msg.accel_x), _finite_array("PlannerOutput", "accel_y", msg.accel_y)
+        raise InvalidMessage(f"PlannerOutput.status = {msg.status!r} is invalid: "
+                             f"expected one of {sorted(STATUS_NAMES)}")
+    ax = _finite_array("PlannerOutput", "accel_x", msg.accel_x)
+    ay = _finite_array("PlannerOutput", "accel_y", msg.accel_y)
     _same_length("PlannerOutput", ("accel_x", ax), ("accel_y", ay))
     columns = [(f, _finite_array("PlannerOutput", f, getattr(msg, f)))
                for f in ("predicted_x", "predicted_y", "predicted_vx", "predicted_vy")]
@@ -200,7 +231,7 @@ def plan_from_msg(msg: Any) -> PlanResult:
         raise InvalidMessage(f"PlannerOutput.cost = {msg.cost!r} is invalid: expected a number (1e300: none)")
     predicted = np.column_stack([values for _, values in columns]) if columns[0][1].size else np.zeros((0, 4))
     cost = msg.cost if msg.cost < 1e299 else math.inf
-    return PlanResult(np.column_stack([ax, ay]), STATUS_NAMES[int(msg.status)], int(msg.iterations),  # type: ignore[arg-type]
+    return PlanResult(np.column_stack([ax, ay]), STATUS_NAMES[int(msg.status)], int(msg.iterations),
                       msg.solve_time, cost, predicted)
 
 
@@ -323,7 +354,7 @@ def odometry_to_msg(node: Any, t: float, state: np.ndarray) -> Any:
     return msg
 
 
-def actuator_to_msg(node: Any, t: float, reference: Reference, u: np.ndarray) -> Any:
+def actuator_to_msg(node: Any, t: float, reference: Reference, u: Union[np.ndarray, Sequence[float]]) -> Any:
     msg = node.make("moose_msgs/msg/ActuatorCommand")
     stamp(msg, t, FRAME_BASE)
     msg.steering_angle, msg.steering_rate = reference.delta, float(u[0])

@@ -131,7 +131,7 @@ def matrix_cases(graph: str) -> list[Fault]:
     """Kill and stall of every node of ``graph`` (the combined planner mode: both planners run)."""
     from .graph import GRAPHS
 
-    return [Fault(node, action, MATRIX_AT, MATRIX_STALL if action == "stall" else 0.0)  # type: ignore[arg-type]
+    return [Fault(node, action, MATRIX_AT, MATRIX_STALL if action == "stall" else 0.0)
             for node in GRAPHS[graph] for action in ("kill", "stall")]
 
 
@@ -171,7 +171,8 @@ def _fmt(value: Optional[float]) -> str:
     return "n/a" if value is None else f"{value:.2f}"
 
 
-MATRIX_HEADER = ("| graph | node | fault | outcome | min clearance (m) | max \\|y\\| (m) | end (x, y) (m) | final speed (m/s) "
+MATRIX_HEADER = ("| graph | node | fault | outcome | min clearance (m) | max \\|y\\| (m) | end (x, y) (m) "
+                 "| final speed (m/s) "
                  "| stopped | degraded | exit | incidents (besides the fault) |\n"
                  "|---|---|---|---|---|---|---|---|---|---|---|---|")
 

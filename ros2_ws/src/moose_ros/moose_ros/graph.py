@@ -15,7 +15,13 @@ from typing import Any, Callable, Optional
 
 from .runtime.names import CLOCK_TOPIC, CLOCK_TYPE
 from .runtime.qos import (
-    QOS_CLOCK, QOS_CLOCK_READER, QOS_DEFAULT, QOS_LATCHED, QOS_LATCHED_READER, QOS_SENSOR, Qos,
+    QOS_CLOCK,
+    QOS_CLOCK_READER,
+    QOS_DEFAULT,
+    QOS_LATCHED,
+    QOS_LATCHED_READER,
+    QOS_SENSOR,
+    Qos,
 )
 
 STAMP_TOLERANCE = 0.5
@@ -206,7 +212,12 @@ TF_STATIC = Topic("/tf_static", "tf2_msgs/msg/TFMessage", QOS_LATCHED, "once at 
 MARKERS = Topic("/planning/markers", "visualization_msgs/msg/MarkerArray", QOS_DEFAULT, "5 Hz (per blend)", 5.0,
                 ("weight_fbl",), (), "in odom: danger zone, its width w, MPC, MSF and blended predicted paths")
 
-COMMAND_TIMEOUT = ACTUATOR_COMMAND.deadline
+def _defined(value: Optional[float]) -> float:
+    assert value is not None
+    return value
+
+
+COMMAND_TIMEOUT = _defined(ACTUATOR_COMMAND.deadline)
 """Actuator commands older than this (s) are stale: five 10 ms command cycles, the vehicle ECU's timeout.
 The one value of the command guard of the CAN bridge, the vehicle-ECU emulator and the simulator's
 topic input (which stands in for the same ECUs)."""
@@ -221,7 +232,7 @@ PLANS: dict[str, Topic] = {"mpc": PLAN_MPC, "msf": PLAN_MSF}
 """The output topic of each planner."""
 
 # -- supervision (moose_ros.nodes.base) -------------------------------------------------------------
-SUPERVISION_PERIOD = 1.0 / ACTUATOR_COMMAND.rate_hz
+SUPERVISION_PERIOD = 1.0 / _defined(ACTUATOR_COMMAND.rate_hz)
 """How often every node checks its inputs' deadlines and its own executor (s, on its clock): the command cycle."""
 STARTUP_GRACE = 1.0
 """An input never received is stale this long after the node's clock started (s): the graph's first plan and
@@ -232,7 +243,7 @@ stale meanwhile (the vehicle ECU's command timeout)."""
 STALL_TIME = 0.25
 """A node whose executor runs no cycle for longer than this (s) stalled (SIGSTOP, a hung callback, a starved CPU):
 five times the tightest deadline, and longer than any planning solve that still meets its 0.2 s slot."""
-CONTROL_LAG_MAX = 2.0 / ACTUATOR_COMMAND.rate_hz
+CONTROL_LAG_MAX = 2.0 / _defined(ACTUATOR_COMMAND.rate_hz)
 """The motion controller missed a deadline when it commands on an estimate older than this (s, on its clock):
 two command cycles; the lockstep loop commands on the estimate of the same cycle."""
 

@@ -5,7 +5,8 @@ Incidents come from two sources, both recorded by ``moose launch``:
 * **/diagnostics** (:meth:`IncidentLog.on_status`): every node publishes its status once a second and at
   once when its level changes (:mod:`moose_ros.nodes.base`); a new *problem* key in its ``problems``
   value becomes an incident (``stale:TOPIC`` → ``input_stale``, ``minimum_risk``/``commands_lost`` →
-  ``minimum_risk``, ``fallback`` → ``planner_fallback``, ``ecu_timeout``), a rise of its ``stalls`` counter a ``stalled``
+  ``minimum_risk``, ``fallback`` → ``planner_fallback``, ``ecu_timeout``, ``invalid:TOPIC`` → ``input_dropped``), a
+  rise of its ``stalls`` counter a ``stalled``
   incident, any other new WARN or ERROR message a ``warning`` or ``error``; the counters
   ``deadline_misses`` and ``stalls`` are kept per node.
 * **the processes and the clock**: a node that exits before it announced itself ``failed_to_start``, one

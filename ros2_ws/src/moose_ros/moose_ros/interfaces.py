@@ -14,12 +14,13 @@ import os
 import re
 import types as pytypes
 from functools import lru_cache
-from importlib.resources import files
 from pathlib import Path
 from typing import Any
 
 from rosbags.interfaces import Nodetype
-from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from moose.resources import package_folder
 
 MSG_PACKAGE = "moose_msgs"
 
@@ -52,7 +53,7 @@ def msg_dir() -> Path:
     env = os.environ.get("MOOSE_MSG_DIR")
     if env:
         return Path(env)
-    shipped = Path(os.fspath(files("moose_ros").joinpath("msg")))
+    shipped = package_folder("moose_ros", "msg")
     if any(shipped.glob("*.msg")):
         return shipped
     try:
@@ -70,7 +71,8 @@ def typestore() -> Any:
     folder = msg_dir()
     files = sorted(folder.glob("*.msg"))
     if not files:
-        raise FileNotFoundError(f"no .msg files in {folder}: reinstall moose_ros or set MOOSE_MSG_DIR to moose_msgs/msg")
+        raise FileNotFoundError(f"no .msg files in {folder}: "
+                                "reinstall moose_ros or set MOOSE_MSG_DIR to moose_msgs/msg")
     definitions: dict[str, Any] = {}
     for path in files:
         definitions.update(get_types_from_msg(path.read_text(encoding="utf-8"), f"{MSG_PACKAGE}/msg/{path.stem}"))
@@ -117,13 +119,16 @@ def _field_type(node: tuple) -> tuple[Any, Any]:
 
     element, size = detail
     inner, inner_default = _field_type(element)
+    # cyclonedds' array[...] and sequence[...] are __class_getitem__ on plain classes (they build Annotated
+    # types), which mypy does not model
     if kind == Nodetype.ARRAY:
-        return idl.array[inner, size], (lambda f=inner_default, n=size: [f() for _ in range(n)])
-    return (idl.sequence[inner, size] if size else idl.sequence[inner]), list
+        return (idl.array[inner, size],  # type: ignore[misc]
+                lambda f=inner_default, n=size: [f() for _ in range(n)])
+    return (idl.sequence[inner, size] if size else idl.sequence[inner]), list  # type: ignore[misc]
 
 
 @lru_cache(maxsize=None)
-def message_class(type_name: str) -> type:
+def message_class(type_name: str) -> type[Any]:
     """The DDS dataclass of ``pkg/msg/Type``; raises :class:`UnknownMessageType` (a KeyError) naming it."""
     from cyclonedds.idl import IdlStruct
 
@@ -144,11 +149,12 @@ def message_class(type_name: str) -> type:
         namespace["__annotations__"] = annotations
         namespace.update(defaults)
 
-    cls = pytypes.new_class(type_name.split("/")[-1], (IdlStruct,), {"typename": dds_type_name(type_name)}, body)
+    cls: type[Any] = pytypes.new_class(type_name.split("/")[-1], (IdlStruct,), {"typename": dds_type_name(type_name)},
+                                       body)
     cls = dataclasses.dataclass(cls)
     for const_name, _kind, value in constants:
         setattr(cls, const_name, value)
-    cls.ros_type = type_name  # type: ignore[attr-defined]
+    cls.ros_type = type_name
     return cls
 
 

@@ -39,10 +39,10 @@ import numpy as np
 from moose.config import load_config
 from moose.metrics import summarize
 from moose.params import ParamError, read_ros_params
-from moose.scenario import Scenario
-from moose.signals import Blend, Reference
 from moose.planning import PlanningRecord
-from moose.schema import Config
+from moose.scenario import Scenario
+from moose.schema import Config, PlannerMode
+from moose.signals import Blend, Reference
 from moose.simulation import SimulationResult
 
 from . import convert as cv
@@ -140,14 +140,15 @@ class Monitor:
             if status.name == "vehicle_simulator" and status.message.startswith("finished"):
                 self.finished = True
 
-    def result(self, planner: str, seed: int) -> SimulationResult:
+    def result(self, planner: PlannerMode, seed: int) -> SimulationResult:
         rows = np.array(sorted(self.odom)) if self.odom else np.zeros((0, 7))  # no odometry: judged incomplete
         trace = {name: rows[:, i] for i, name in enumerate(("t", "x", "y", "theta", "vx", "vy", "delta"))}
         planning = [
-            PlanningRecord(t, threat, plan, None, Blend(self.weights.get(t, float("nan")), plan.accel), Reference(0.0, 0.0), float("nan"))
+            PlanningRecord(t, threat, plan, None, Blend(self.weights.get(t, float("nan")), plan.accel),
+                           Reference(0.0, 0.0), float("nan"))
             for t, plan, threat in self.plans
         ]
-        return SimulationResult(self.scenario, planner, seed, trace, planning, self.first_threat,  # type: ignore[arg-type]
+        return SimulationResult(self.scenario, planner, seed, trace, planning, self.first_threat,
                                 self.config, self.scenario.lead_time + self.scenario.duration)
 
 
@@ -155,7 +156,7 @@ def _file_params(params_file: Optional[str], node: str) -> dict[str, Any]:
     return read_ros_params(params_file, node) if params_file else {}
 
 
-def planner_mode(planner: Optional[str], params_file: Optional[str]) -> str:
+def planner_mode(planner: Optional[PlannerMode], params_file: Optional[str]) -> PlannerMode:
     """``planner``, or the mode ``weight_fbl`` reads from the parameter file (``simulation.planner``)."""
     if params_file:
         check_parameter_file(params_file)
@@ -181,7 +182,8 @@ def node_overrides(graph: str, planner: str, params: Optional[dict[str, Any]] = 
         from moose.canbus.bus import INTERFACES
 
         if given["can_interface"] not in INTERFACES:
-            raise ParamError(f"can_interface = {given['can_interface']!r} is invalid: expected one of {list(INTERFACES)}")
+            raise ParamError(f"can_interface = {given['can_interface']!r} is invalid: "
+                             f"expected one of {list(INTERFACES)}")
     taken = set().union(*(parameter_names(n) for n in nodes))
     unknown = sorted(k for k in given if "." not in k and k not in taken)
     if unknown:
@@ -226,7 +228,7 @@ def launch(
     scenario: Scenario,
     params: dict[str, Any],
     graph: str = "full",
-    planner: Optional[str] = None,
+    planner: Optional[PlannerMode] = None,
     seed: int = 0,
     params_file: Optional[str] = None,
     rate: float = 1.0,
@@ -408,7 +410,7 @@ def _watch_heartbeats(monitor: Monitor, procs: dict[str, subprocess.Popen], exit
         on_sim = bool(overrides[name].get("use_sim_time"))
         if on_sim and (now_sim is None or sim is None):
             continue
-        quiet = (now_sim - sim) if on_sim else (now_wall - wall)  # type: ignore[operator]
+        quiet = (now_sim - sim) if on_sim else (now_wall - wall)
         if quiet > deadline and name not in silent:
             silent.add(name)
             monitor.log.add(now_sim, name, "stalled", f"silent on /diagnostics for {quiet:.1f} s "
@@ -451,7 +453,8 @@ def _stop_children(procs: dict[str, subprocess.Popen], exits: dict[str, int], en
                 log.add(monitor.sim_time, name, "died", ends[name])
 
 
-def _summary(monitor: Monitor, planner: str, seed: int, rate: float, exits: dict[str, int], ends: dict[str, str],
+def _summary(monitor: Monitor, planner: PlannerMode, seed: int, rate: float, exits: dict[str, int],
+             ends: dict[str, str],
              faults: Sequence[Fault], cut_short: str, interrupted: list[str]) -> dict[str, Any]:
     log = monitor.log
     if cut_short:

@@ -74,7 +74,7 @@ def watch_parent(on_exit: Callable[[], None], poll: float = 0.2) -> Optional[thr
     parent = int(raw)
     pidfd: Optional[int] = None
     try:
-        pidfd = os.pidfd_open(parent)  # type: ignore[attr-defined]
+        pidfd = os.pidfd_open(parent)
     except ProcessLookupError:
         on_exit()
         return None

@@ -13,10 +13,10 @@ Parquet), :mod:`.replan` (open-loop re-planning and its figure), :mod:`.view` (b
 """
 from .errors import BagError
 from .export import export, flatten
+from .params import RunParameters, read_run_parameters
 from .play import play
 from .reader import BagMessage, BagReader, ReadReport, bag_info, read_bag
 from .record import Recorder, record_result, record_simulation
-from .params import RunParameters, read_run_parameters
 from .replan import plot_replan, replan
 from .view import plot_birdseye
 from .writer import BagWriter

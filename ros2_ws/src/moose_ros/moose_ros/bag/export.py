@@ -1,4 +1,5 @@
-"""Export a bag's topics to CSV or Parquet, one file per topic, fields flattened (``twist.twist.linear.x``, ``accel_y[3]``)."""
+"""Export a bag's topics to CSV or Parquet, one file per topic, fields flattened (``twist.twist.linear.x``,
+``accel_y[3]``)."""
 from __future__ import annotations
 
 import csv

@@ -8,13 +8,14 @@ the bag is opened, so a bag left without ``metadata.yaml`` by a killed recorder 
 """
 from __future__ import annotations
 
-import struct
-
 import dataclasses
+import struct
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any, Optional, cast, get_args
 
 import yaml
+
+from moose.schema import PlannerMode
 
 from .errors import BagError
 
@@ -32,7 +33,7 @@ class RunParameters:
     """:class:`moose.schema.Config`, with the road's μ of the run."""
     scenario: Any
     """:class:`moose.scenario.Scenario`."""
-    planner: str
+    planner: PlannerMode
     seed: int
 
     def as_strings(self) -> dict[str, str]:
@@ -61,7 +62,11 @@ class RunParameters:
             document = yaml.safe_load(data["moose.config"])
             config = config_from_mapping(document["/**"]["ros__parameters"], where=f"{where} moose.config")
             scenario = scenario_from_mapping(yaml.safe_load(data["moose.scenario"]), where=f"{where} moose.scenario")
-            return cls(config, scenario, data["moose.planner"], int(data["moose.seed"]))
+            planner = data["moose.planner"]
+            if planner not in get_args(PlannerMode):
+                raise ParamError(f"moose.planner = {planner!r} is invalid: "
+                                 f"expected one of {list(get_args(PlannerMode))}")
+            return cls(config, scenario, cast(PlannerMode, planner), int(data["moose.seed"]))
         except (ParamError, yaml.YAMLError, KeyError, TypeError, ValueError) as exc:
             raise BagError(f"{where}: run parameters are unreadable: {exc}") from None
 

@@ -35,7 +35,8 @@ def play(path: str | Path, node: Any, rate: float = 1.0, topics: Optional[Sequen
         except (UnknownMessageType, KeyError, AttributeError, TypeError) as exc:
             report.skip(m.topic, m.type_name, f"not published: this installation cannot send it ({exc})")
     if not prepared:
-        raise BagError(f"bag {str(path)!r} has no messages on {list(topics) if topics else 'any topic'} that can be played")
+        raise BagError(f"bag {str(path)!r} has no messages on {list(topics) if topics else 'any topic'} "
+                       "that can be played")
     publishers: dict[str, Any] = {}
     clock_pub = CLOCK.publisher(node) if clock else None
     t0 = prepared[0][0].timestamp_ns + int(start * 1e9)

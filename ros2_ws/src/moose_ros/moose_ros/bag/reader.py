@@ -114,7 +114,7 @@ class _Decoders:
         if not definition.strip():
             return f"type {type_name} is unknown here and the bag holds no definition of it"
         try:
-            from rosbags.typesys import Stores, get_types_from_idl, get_typestore, get_types_from_msg
+            from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 
             if encoding in ("ros2idl", "idl"):
                 sep = "=" * 80 + "\n"
@@ -282,7 +282,9 @@ def _stream(file: Path) -> _Stream:
             counting = _Counting(handle)
             end = position
             try:
-                for record in StreamReader(counting, skip_magic=resumed, emit_chunks=True).records:  # type: ignore[arg-type]
+                # mcap annotates its input as a file object, but only calls read(), which _Counting has
+                mcap_reader = StreamReader(counting, skip_magic=resumed, emit_chunks=True)  # type: ignore[arg-type]
+                for record in mcap_reader.records:
                     if isinstance(record, Chunk):
                         records, unread, intact = _chunk(record)
                         for inner in records:
@@ -492,15 +494,17 @@ def bag_info(path: str | Path, report: Optional[ReadReport] = None) -> dict[str,
     first = last = None
     report = report if report is not None else ReadReport(str(path))
     for m in read_bag(path, report=report):
-        entry = stats.setdefault(m.topic, {"type": m.type_name, "count": 0, "first": m.timestamp_ns, "last": m.timestamp_ns})
+        entry = stats.setdefault(m.topic, {"type": m.type_name, "count": 0, "first": m.timestamp_ns,
+                                           "last": m.timestamp_ns})
         entry["count"] += 1
         entry["last"] = m.timestamp_ns
         first = m.timestamp_ns if first is None else min(first, m.timestamp_ns)
         last = m.timestamp_ns if last is None else max(last, m.timestamp_ns)
-    duration = (last - first) * 1e-9 if first is not None else 0.0
+    duration = (last - first) * 1e-9 if first is not None and last is not None else 0.0
     topics = {}
     for topic, e in sorted(stats.items()):
         span = (e["last"] - e["first"]) * 1e-9
-        topics[topic] = {"type": e["type"], "count": e["count"], "rate_hz": (e["count"] - 1) / span if span > 0 else math.nan}
+        topics[topic] = {"type": e["type"], "count": e["count"],
+                         "rate_hz": (e["count"] - 1) / span if span > 0 else math.nan}
     return {"path": str(path), "duration_s": duration, "messages": sum(e["count"] for e in stats.values()),
             "topics": topics, "losses": report.losses(), "registered_types": list(report.registered)}

@@ -6,7 +6,19 @@ from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
 
 from ..graph import (
-    ACTUATOR_COMMAND, BLEND, CLOCK, DIAGNOSTICS, MARKERS, OBSTACLES, ODOM, PLANS, REFERENCE, STATE, TF, TF_STATIC, THREAT,
+    ACTUATOR_COMMAND,
+    BLEND,
+    CLOCK,
+    DIAGNOSTICS,
+    MARKERS,
+    OBSTACLES,
+    ODOM,
+    PLANS,
+    REFERENCE,
+    STATE,
+    TF,
+    TF_STATIC,
+    THREAT,
     TOPICS,
 )
 from .errors import BagError
@@ -101,7 +113,8 @@ def record_result(result: Any, path: str | Path) -> dict[str, int]:
     for record in result.planning:
         for kind, plan in (("mpc", record.mpc), ("msf", record.msf)):
             if plan is not None:
-                add(record.t, PLANS[kind].name, cv.plan_to_msg(factory, record.t, kind, plan, record.threat is not None))
+                add(record.t, PLANS[kind].name,
+                    cv.plan_to_msg(factory, record.t, kind, plan, record.threat is not None))
         add(record.t, BLEND.name, cv.blend_to_msg(factory, record.t, record.blend, record.reference,
                                                      record.delta_mpc))
         estimate = result.estimates[int(round(record.t * result.config.simulation.motion_rate_hz))]  # one per tick
@@ -122,8 +135,8 @@ def record_result(result: Any, path: str | Path) -> dict[str, int]:
                                                            "finished" if last else "running", values))
     entries.sort(key=lambda e: (e[0], e[1]))
     try:
-        for stamp_ns, _order, topic, msg in entries:
-            writer.write(topic, TOPICS[topic].type, stamp_ns, bytes(msg.serialize()))
+        for stamp_ns, _order, name, msg in entries:
+            writer.write(name, TOPICS[name].type, stamp_ns, bytes(msg.serialize()))
     finally:
         writer.close()
     return dict(writer.counts)

@@ -10,6 +10,8 @@ import math
 from pathlib import Path
 from typing import Any, Optional
 
+from moose.schema import PlannerMode
+
 from ..graph import BLEND, PLAN_MPC, PLAN_MSF, STATE, THREAT
 from ..interfaces import from_rosbags
 from .errors import BagError
@@ -17,7 +19,7 @@ from .params import read_run_parameters
 from .reader import BagReader, ReadReport
 
 
-def replan(path: str | Path, config: Any = None, planner: Optional[str] = None, v_des: Optional[float] = None,
+def replan(path: str | Path, config: Any = None, planner: Optional[PlannerMode] = None, v_des: Optional[float] = None,
            report: Optional[ReadReport] = None) -> dict[str, Any]:
     """Run the planners open-loop on a bag's recorded state/threat stream at its planning instants.
 
@@ -44,7 +46,7 @@ def replan(path: str | Path, config: Any = None, planner: Optional[str] = None, 
         source = "given" if config is not None else ("bag" if run is not None else "default")
         config = config if config is not None else (run.config if run is not None else load_config())
         planner = planner or (run.planner if run is not None else "combined")
-        step = PlanningStep(config, planner)  # type: ignore[arg-type]
+        step = PlanningStep(config, planner)
         result = _replan(reader, [t.name for t in used if t.name in reader.topics], step, planner, v_des,
                          run.scenario if run is not None and v_des is None else None)
     finally:
@@ -87,6 +89,7 @@ def _replan(reader: BagReader, topics: list[str], step: Any, planner: str, v_des
         if m.topic == BLEND.name and estimate is not None:
             t = cv.time_of(msg)
             speed = scenario.desired_speed(detected) if scenario is not None else v_des
+            assert speed is not None  # without a scenario, v_des is set at the first estimate
             record = step.plan(t, estimate, threat, float(speed))
             blend, new_mpc = record.blend, record.mpc
             old_mpc = recorded_plans["mpc"].get(round(t, 6))
@@ -108,7 +111,8 @@ def _replan(reader: BagReader, topics: list[str], step: Any, planner: str, v_des
         "steps": len(rows), "planner": planner,
         "rms_ax": diff("recorded_ax", "ax"), "rms_ay": diff("recorded_ay", "ay"),
         "rms_weight": diff("recorded_weight", "weight"), "rms_delta": diff("recorded_delta", "delta"),
-        "mpc_status_agreement": (sum(r["recorded_mpc_status"] == r["mpc_status"] for r in same) / len(same)) if same else None,
+        "mpc_status_agreement": (sum(r["recorded_mpc_status"] == r["mpc_status"] for r in same) / len(same)
+                                 if same else None),
         "invalid_messages": invalid,
     }
     return {"summary": summary, "rows": rows}

@@ -57,8 +57,8 @@ def plot_birdseye(path: str | Path, out: str | Path, title: str = "") -> Path:
     for k, markers in enumerate(instants):
         for ns in ("mpc", "msf", "blend"):
             if ns in markers:
-                xs, ys = zip(*((p.x, p.y) for p in markers[ns].points))
-                ax.plot(xs, ys, color=MARKER_COLOURS[ns][:3], linewidth=2.2 if k == 0 else 0.8,
+                px, py = zip(*((p.x, p.y) for p in markers[ns].points))
+                ax.plot(px, py, color=MARKER_COLOURS[ns][:3], linewidth=2.2 if k == 0 else 0.8,
                         alpha=1.0 if k == 0 else 0.35, label=f"{_LABELS[ns]} (first after detection bold)" if k == 0
                         else None, marker="o" if k == 0 else None, markersize=3)
     ax.plot(*zip(*truth), color="0.2", linewidth=1.6, label="path (ground truth)")

@@ -121,7 +121,8 @@ class BagWriter:
             if time.monotonic() - self._last_sync >= self.fsync_period:
                 self.sync()
         except OSError as exc:
-            raise BagError(f"bag {str(self.path)!r}: write failed ({exc.strerror}); the bag is readable up to here") from None
+            raise BagError(f"bag {str(self.path)!r}: write failed ({exc.strerror}); "
+                           "the bag is readable up to here") from None
         self.counts[topic] += 1
         self.first_ns = timestamp_ns if self.first_ns is None else self.first_ns
         self.last_ns = timestamp_ns

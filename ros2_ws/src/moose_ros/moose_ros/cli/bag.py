@@ -76,13 +76,16 @@ def cmd_bag(args: argparse.Namespace) -> int:
             result = bag.replan(args.path, config, args.planner, args.v_des, report)
             summary = result["summary"]
             print({"given": f"parameters      {args.params}",
-                   "bag": f"parameters      the run's (bag): scenario {summary['scenario']}, road μ {summary['road_mu']}",
+                   "bag": f"parameters      the run's (bag): scenario {summary['scenario']}, "
+                          f"road μ {summary['road_mu']}",
                    "default": "parameters      default config/moose.yaml (the bag has no run parameters)"}[
                        summary["parameters"]])
             print("  t (s)   w rec / new    v̇_Y rec / new (m/s²)   δ* rec / new (rad)   MPC status rec / new")
             for r in result["rows"]:
-                print(f"{r['t']:7.2f}   {r['recorded_weight']:5.2f} / {r['weight']:5.2f}   {r['recorded_ay']:8.3f} / {r['ay']:8.3f}"
-                      f"      {r['recorded_delta']:6.3f} / {r['delta']:6.3f}     {r['recorded_mpc_status'] or '-'} / {r['mpc_status'] or '-'}")
+                print(f"{r['t']:7.2f}   {r['recorded_weight']:5.2f} / {r['weight']:5.2f}   "
+                      f"{r['recorded_ay']:8.3f} / {r['ay']:8.3f}      "
+                      f"{r['recorded_delta']:6.3f} / {r['delta']:6.3f}     "
+                      f"{r['recorded_mpc_status'] or '-'} / {r['mpc_status'] or '-'}")
             print(json.dumps(summary, indent=2, allow_nan=False))
             if plot is not None:
                 print(f"figure {bag.plot_replan(result['rows'], plot)}")

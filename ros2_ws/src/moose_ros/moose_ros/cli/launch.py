@@ -13,7 +13,12 @@ import json
 from typing import Any
 
 from moose.cli.common import (
-    add_scenario_arguments, check_output_dir, check_output_file, positive_float, run_folder, scenario_from_args,
+    add_scenario_arguments,
+    check_output_dir,
+    check_output_file,
+    positive_float,
+    run_folder,
+    scenario_from_args,
 )
 from moose.cli.simulate import format_summary
 from moose.params import ParamError
@@ -28,8 +33,10 @@ def add_subparser(subparsers: Any) -> None:
     launch.add_argument("graph", nargs="?", default="full", choices=list(GRAPHS),
                         help="full (simulator on topics), car (CAN bridge, no simulator) or can (both over the DBC)")
     launch.add_argument("--can-interface", help="udp_multicast (default), socketcan or virtual")
-    launch.add_argument("--can-channel", help="multicast group (default: moose.canbus.bus.DEFAULT_GROUP) / socketcan device")
-    launch.add_argument("--can-port", type=int, help="UDP port of udp_multicast (default: moose.canbus.bus.DEFAULT_PORT)")
+    launch.add_argument("--can-channel",
+                        help="multicast group (default: moose.canbus.bus.DEFAULT_GROUP) / socketcan device")
+    launch.add_argument("--can-port", type=int,
+                        help="UDP port of udp_multicast (default: moose.canbus.bus.DEFAULT_PORT)")
     add_scenario_arguments(launch)
     launch.add_argument("--runtime", choices=RUNTIMES,
                         help="what the nodes run on: rclpy (ROS 2; the interpreter of .venv-ros when this one has no "
@@ -42,7 +49,8 @@ def add_subparser(subparsers: Any) -> None:
     launch.add_argument("--bag", help="record every topic into this bag directory (default: a new folder under runs/)")
     launch.add_argument("--no-bag", action="store_true", help="do not record a bag")
     launch.add_argument("--foxglove", nargs="?", type=int, const=DEFAULT_PORT, metavar="PORT",
-                        help=f"serve the live graph to Foxglove over its WebSocket protocol (default port {DEFAULT_PORT})")
+                        help="serve the live graph to Foxglove over its WebSocket protocol "
+                             f"(default port {DEFAULT_PORT})")
     launch.add_argument("--foxglove-host", default=DEFAULT_HOST,
                         help=f"address the live view binds to (default {DEFAULT_HOST}: this machine only)")
     launch.set_defaults(func=cmd_launch)

@@ -19,11 +19,11 @@ starts) stands while such messages arrived within the last :data:`INVALID_HOLD`.
 **Diagnostics.**  The status on /diagnostics is the node's own (``level``, ``message``, ``values``, set by
 its job) combined with its current *problems* (:meth:`GraphNode.problem`): the highest level wins, the
 messages are joined, and ``values`` carries ``problems`` (the problem keys, e.g. ``stale:/perception/state``,
-``minimum_risk``), each problem's text under its key, ``deadline_misses``, ``stalls`` and ``longest_gap_ms``.  It is published once a second
-and at once whenever its level changes, so a node that reacts to another's health (the motion controller)
-hears of an error within one supervision cycle.  Levels: OK; WARN — degraded, the node still does its job
-(a planner fell back, a slow cycle); ERROR — the node cannot do its job, and who depends on it must not
-rely on its output.
+``minimum_risk``), each problem's text under its key, ``deadline_misses``, ``stalls`` and ``longest_gap_ms``.  It is
+published once a second and at once whenever its level changes, so a node that reacts to another's health (the
+motion controller) hears of an error within one supervision cycle.  Levels: OK; WARN — degraded, the node still
+does its job (a planner fell back, a slow cycle); ERROR — the node cannot do its job, and who depends on it must
+not rely on its output.
 """
 from __future__ import annotations
 
@@ -32,8 +32,17 @@ from collections import Counter
 from typing import Any, Callable, Iterable, Optional
 
 from .. import convert as cv
-from ..graph import (CLOCK, CYCLE_DEADLINE, DIAGNOSTICS, STALL_TIME, STARTUP_GRACE, SUPERVISION_PERIOD, TF_STATIC, Topic,
-                     subscribes)
+from ..graph import (
+    CLOCK,
+    CYCLE_DEADLINE,
+    DIAGNOSTICS,
+    STALL_TIME,
+    STARTUP_GRACE,
+    SUPERVISION_PERIOD,
+    TF_STATIC,
+    Topic,
+    subscribes,
+)
 from ..parameters import node_parameters
 
 OK, WARN, ERROR = 0, 1, 2
@@ -97,7 +106,8 @@ class GraphNode:
             self.config = self.params.load_scenario().configure(self.config)
         # transient local: a late joiner (the simulator waiting for the graph) sees each node's last status
         self._diag = DIAGNOSTICS.publisher(rt)
-        self.level, self.message, self.values = OK, "running", {}
+        self.level, self.message = OK, "running"
+        self.values: dict[str, Any] = {}
         self.problems: dict[str, tuple[int, str]] = {}
         """Current problems: key → (level, text); see :meth:`problem`."""
         # /clock is the runtime's (with simulated time, a silent clock stops every deadline with it); /diagnostics

@@ -9,8 +9,16 @@ from moose.motion import MotionController
 from moose.signals import Reference, StateEstimate
 
 from .. import convert as cv
-from ..graph import (ACTUATOR_COMMAND, CONTROL_LAG_MAX, DIAGNOSTICS, REFERENCE, STATE, STEERING, WHEEL_SPEEDS,
-                     essential_upstream)
+from ..graph import (
+    ACTUATOR_COMMAND,
+    CONTROL_LAG_MAX,
+    DIAGNOSTICS,
+    REFERENCE,
+    STATE,
+    STEERING,
+    WHEEL_SPEEDS,
+    essential_upstream,
+)
 from .base import ERROR, WARN, GraphNode
 
 NEEDED = (STATE, REFERENCE, STEERING)

@@ -19,7 +19,7 @@ from moose.planning import PlanningStep, blend_path
 from moose.signals import PlanResult, StateEstimate, Threat
 
 from .. import convert as cv
-from ..graph import BLEND, MARKERS, PLANS, PLAN_MPC, PLAN_MSF, REFERENCE, STATE, THREAT
+from ..graph import BLEND, MARKERS, PLAN_MPC, PLAN_MSF, PLANS, REFERENCE, STATE, THREAT
 from .base import ERROR, WARN, GraphNode
 
 MODE_PLANNERS = {"combined": ("mpc", "msf"), "mpc": ("mpc",), "msf": ("msf",)}

@@ -61,7 +61,8 @@ def typed_value(name: str, value: Any, default: Any) -> Any:
     else:
         ok = True
     if not ok:
-        raise ParamError(f"{name} = {value!r} is invalid: expected {type(default).__name__} like the default {default!r}")
+        raise ParamError(f"{name} = {value!r} is invalid: "
+                         f"expected {type(default).__name__} like the default {default!r}")
     return value
 
 

@@ -110,8 +110,16 @@ class DdsNode(NodeBase):
     def __init__(self, name: str, params_file: Optional[str] = None, overrides: Optional[dict[str, Any]] = None,
                  namespace: Optional[str] = None) -> None:
         from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication, BuiltinTopicDcpsSubscription
-        from cyclonedds.core import GuardCondition, InstanceState, Policy, Qos as DdsQos, ReadCondition, SampleState
-        from cyclonedds.core import ViewState, WaitSet
+        from cyclonedds.core import (
+            GuardCondition,
+            InstanceState,
+            Policy,
+            ReadCondition,
+            SampleState,
+            ViewState,
+            WaitSet,
+        )
+        from cyclonedds.core import Qos as DdsQos
         from cyclonedds.domain import DomainParticipant
 
         super().__init__(name, params_file, overrides or {}, namespace)
@@ -166,11 +174,13 @@ class DdsNode(NodeBase):
 
     @staticmethod
     def _qos(profile: Qos, writer: bool, type_name: str) -> Any:
-        from cyclonedds.core import Policy, Qos as DdsQos
+        from cyclonedds.core import Policy
+        from cyclonedds.core import Qos as DdsQos
         from cyclonedds.util import duration
 
         policies = [
-            Policy.Reliability.Reliable(duration(milliseconds=100)) if profile.reliable else Policy.Reliability.BestEffort,
+            (Policy.Reliability.Reliable(duration(milliseconds=100)) if profile.reliable
+             else Policy.Reliability.BestEffort),
             Policy.History.KeepLast(profile.depth),
             Policy.Durability.TransientLocal if profile.transient_local else Policy.Durability.Volatile,
             Policy.Userdata(endpoint_user_data(type_name)),
@@ -329,7 +339,8 @@ class DdsNode(NodeBase):
                 continue
             if own_kind == "subscription":  # remote writer, our reader
                 if qos.reliable and not reliable:
-                    self._report((topic, kind, "reliability"), f"topic {topic!r}: a remote publisher offers best effort, "
+                    self._report((topic, kind, "reliability"),
+                                 f"topic {topic!r}: a remote publisher offers best effort, "
                                  "this subscription requests reliable; they will not communicate")
                 if qos.transient_local and not transient:
                     self._report((topic, kind, "durability"), f"topic {topic!r}: a remote publisher offers volatile, "

@@ -194,7 +194,7 @@ class RclpyNode(NodeBase):
                         break
                     msg, info = taken
 
-            queue.queues_for = self  # type: ignore[attr-defined]
+            queue.queues_for = self  # type: ignore[attr-defined]  # a marker on the function; mypy has no such attributes
             sub.callback = queue  # two parameters: rclpy passes the message info
 
     def _flush(self) -> None:
