@@ -20,7 +20,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import numbers
-from typing import Literal
+from typing import Literal, get_args
 
 from .params import ParamError, VehicleParams, check, non_negative, positive, replace, unit_interval
 
@@ -431,6 +431,8 @@ class ManeuverParams:
 
 
 PlannerMode = Literal["combined", "mpc", "msf"]
+PLANNER_MODES: tuple[str, ...] = get_args(PlannerMode)
+"""The planner modes, for command-line choices."""
 
 
 @dataclasses.dataclass(frozen=True)

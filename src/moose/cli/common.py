@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any, Optional, Sequence
 
 from ..params import ParamError
+from ..schema import PLANNER_MODES
 
 DEFAULT_SCENARIO = "paper_v7_tau1.4"
 """The paper's extreme case (7 m/s, τ = 1.4 s, ν ≈ 0.95): the main job."""
@@ -182,7 +183,7 @@ def add_scenario_arguments(parser: argparse.ArgumentParser) -> None:
                        help="ad-hoc test: widen the field to |y| <= half width + this (m; default: the paper's field)")
     group.add_argument("--duration", type=positive_float, help="simulated seconds after the obstacle appears")
     group.add_argument("--config", help="ROS 2 parameter file (default config/moose.yaml)")
-    group.add_argument("--planner", choices=["combined", "mpc", "msf"], help="planner driving the car")
+    group.add_argument("--planner", choices=PLANNER_MODES, help="planner driving the car")
     group.add_argument("--mu", type=positive_float, help="friction coefficient of the road (the plant's)")
     group.add_argument("--mu-estimate", type=positive_float,
                        help="friction the stack assumes, when it differs from the road's (a robustness experiment)")

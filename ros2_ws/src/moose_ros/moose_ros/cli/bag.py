@@ -15,6 +15,7 @@ from typing import Any
 
 from moose.cli.common import EXIT_CLEAR, EXIT_FAILED, check_output_file, plot_suffixes, positive_float, run_folder
 from moose.params import ParamError
+from moose.schema import PLANNER_MODES
 
 
 def add_subparser(subparsers: Any) -> None:
@@ -41,7 +42,7 @@ def add_subparser(subparsers: Any) -> None:
     export.add_argument("--topics", nargs="+")
     replan = bag_sub.add_parser("replan", help="run the planners open-loop on a bag's recorded state and threats")
     replan.add_argument("path")
-    replan.add_argument("--planner", choices=["combined", "mpc", "msf"], help="planner mode (default: the run's)")
+    replan.add_argument("--planner", choices=PLANNER_MODES, help="planner mode (default: the run's)")
     replan.add_argument("--params", help="ROS 2 parameter file with the parameters to judge (default: the run's, "
                         "kept in the bag)")
     replan.add_argument("--v-des", type=positive_float, help="desired speed (default: the run's scenario)")
