@@ -9,7 +9,7 @@ import pytest
 
 from moose.schema import VerdictParams
 from moose.signals import Obstacle
-from moose.verdict import clearance, judge, segment_hits_box
+from moose.verdict import judge, segment_hits_box
 
 ZONE = Obstacle(20.0, 22.0, -2.0, 2.0)
 FIELD = Obstacle(-50.0, 150.0, -5.0, 10.0)
@@ -43,7 +43,7 @@ def test_a_corner_cut_between_two_samples_is_a_collision() -> None:
     # 1 s samples: no sample is inside, but the straight segment between two crosses the corner
     t = np.array([0.0, 1.0, 2.0])
     x, y = np.array([15.0, 19.0, 23.0]), np.array([-1.0, -1.0, -1.0])
-    assert np.all(clearance(x, y, ZONE) > 0.0)  # every sample outside: before and after the zone
+    assert np.all(ZONE.clearance(x, y) > 0.0)  # every sample outside: before and after the zone
     assert segment_hits_box(19.0, -1.0, 23.0, -1.0, ZONE)
     tr = {"t": t * 4.0, "x": x, "y": y, "theta": np.zeros(3), "vx": np.ones(3), "vy": np.zeros(3)}
     v = judge(tr["t"], tr["x"], tr["y"], tr["theta"], tr["vx"], tr["vy"], ZONE, FIELD, 8.0, VerdictParams(max_gap=5.0))

@@ -76,14 +76,6 @@ def segment_hits_box(x0: float, y0: float, x1: float, y1: float, box: Obstacle) 
     return True
 
 
-def clearance(x: np.ndarray, y: np.ndarray, box: Obstacle) -> np.ndarray:
-    """Signed distance of each point to ``box`` (m): positive outside, negative inside (to the nearest edge)."""
-    dx = np.maximum(box.x_min - x, x - box.x_max)
-    dy = np.maximum(box.y_min - y, y - box.y_max)
-    outside = np.hypot(np.maximum(dx, 0.0), np.maximum(dy, 0.0))
-    return np.where((dx <= 0.0) & (dy <= 0.0), np.maximum(dx, dy), outside)
-
-
 def _coverage(t: np.ndarray, end_time: float, max_gap: float) -> Optional[str]:
     """Why the samples do not cover [0, end_time], or None."""
     if t.size == 0:
@@ -116,7 +108,7 @@ def judge(t: np.ndarray, x: np.ndarray, y: np.ndarray, theta: np.ndarray, vx: np
     missing = _coverage(t, end_time, params.max_gap)
     if t.size == 0:
         return Verdict("incomplete", False, False, False, False, False, None, None, None, missing or "")
-    gap = clearance(x, y, zone)
+    gap = zone.clearance(x, y)
     hit = bool(np.any(gap < 0.0)) or any(
         segment_hits_box(float(x[i]), float(y[i]), float(x[i + 1]), float(y[i + 1]), zone) for i in range(len(x) - 1))
     min_clearance = float(np.min(gap))
