@@ -96,7 +96,9 @@ def judge(t: np.ndarray, x: np.ndarray, y: np.ndarray, theta: np.ndarray, vx: np
     """The verdict of one run from the sampled true state (arrays of equal length, ``t`` increasing).
 
     ``vx``, ``vy`` are body-frame velocities (``base_link``), ``theta`` the yaw in ``odom``.
-    Non-finite samples count as missing (they never make a run look better).
+    Non-finite (or None) samples count as missing (they never make a run look better).  Samples are
+    taken in time order; samples with equal times keep the order given.  A sample on the zone's edge
+    touches it: the zone is closed.
     """
     arrays = [np.asarray(a, dtype=float) for a in (t, x, y, theta, vx, vy)]
     if len({a.shape for a in arrays}) != 1 or arrays[0].ndim != 1:
@@ -109,7 +111,7 @@ def judge(t: np.ndarray, x: np.ndarray, y: np.ndarray, theta: np.ndarray, vx: np
     if t.size == 0:
         return Verdict("incomplete", False, False, False, False, False, None, None, None, missing or "")
     gap = zone.clearance(x, y)
-    hit = bool(np.any(gap < 0.0)) or any(
+    hit = bool(np.any(gap <= 0.0)) or any(
         segment_hits_box(float(x[i]), float(y[i]), float(x[i + 1]), float(y[i + 1]), zone) for i in range(len(x) - 1))
     min_clearance = float(np.min(gap))
     if hit:
