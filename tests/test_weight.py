@@ -62,8 +62,8 @@ def test_steering_usage_of_the_first_steps() -> None:
     accel[1, 1] = 6.0
     late = PlanResult(accel, "converged", 5, 1e-3, 1.0, zoh_rollout(np.array([0.0, 0.0, 5.0, 0.0]), accel, 0.2))
     est5 = StateEstimate(0.0, 0.0, 0.0, 0.0, 5.0, 0.0, 0.0, 0.0)
-    # kinematic steering L a / v^2 = 1.7 * 6 / 25 = 0.408 rad: 1.36 delta_max
-    assert f.steering_usage(late, est5) == pytest.approx(1.7 * 6.0 / 25.0 / 0.3)
+    # 6 m/s² at 5 m/s needs 0.408 rad of kinematic steering (curvature a / v² = tan δ / L): beyond δ_max
+    assert f.steering_usage(late, est5) > 1.3
     assert wf(n_rho=1).steering_usage(late, est5) == 0.0
     assert f.weight(late, threat(), est5) < 0.01 < wf(n_rho=1).weight(late, threat(), est5)
     # row 0 is the FBL's delta* (the paper's delta_MPC): 6 m/s^2 from straight running needs more front
@@ -115,3 +115,26 @@ def test_next_initial_guess_shifts_by_one_step() -> None:
 def test_bad_parameters_name_the_field(field: str, value: float) -> None:
     with pytest.raises(ParamError, match=field):
         WeightParams(**{field: value})
+
+
+def test_steering_usage_is_the_steering_the_car_needs_for_the_planned_acceleration() -> None:
+    """Independent reference: the plant itself.  Hold a small steering angle at 5 m/s, measure the steady lateral
+    acceleration it gives, and scale (linear range): a plan asking for a_y in its second step must report the
+    angle the car needs for it, |δ| / δ_max."""
+    from moose.vehicle import VY, VehiclePlant, initial_state
+
+    plant = VehiclePlant(VEHICLE)
+    state = initial_state(VEHICLE, vx=5.0)
+    state[-1] = 0.01  # δ
+    plant.reset(state)
+    plant.step(np.zeros(3), 4000)
+    a_per_rad = plant.specific_force[1] / 0.01  # steady a_y per radian of steering at 5 m/s
+    for a_y in (0.5, -0.8, 1.0):
+        accel = np.zeros((10, 2))
+        accel[1, 1] = a_y
+        ahead = PlanResult(accel, "converged", 5, 1e-3, 1.0,
+                           zoh_rollout(np.array([0.0, 0.0, 5.0, 0.0]), np.zeros((10, 2)), 0.2))
+        est5 = StateEstimate(0.0, 0.0, 0.0, 0.0, 5.0, 0.0, 0.0, 0.0)
+        assert wf(n_rho=3).steering_usage(ahead, est5) == pytest.approx(abs(a_y) / a_per_rad / VEHICLE.delta_max,
+                                                                        rel=0.02)
+        assert abs(plant.state[VY]) < 0.1  # the steady state it was measured in
