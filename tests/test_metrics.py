@@ -56,10 +56,10 @@ def test_a_scenario_that_must_collide_is_a_collision_in_the_summary(collision: S
 
 
 def test_moose_simulate_reports_the_collision(tmp_path: Path) -> None:
-    out = tmp_path / "summary.json"
+    out, figure = tmp_path / "summary.json", tmp_path / "figure.png"
     proc = subprocess.run([sys.executable, "-m", "moose.cli", "simulate", "--speed", str(SPEED), "--tau", str(TAU),
                            "--obstacle-half-width", str(HALF_WIDTH), "--duration", str(DURATION), "--json", str(out),
-                           "--no-bag"], capture_output=True, text=True, timeout=300)
+                           "--plot", str(figure), "--no-bag"], capture_output=True, text=True, timeout=300)
     from moose.cli import common
 
     # the exit status of a collision (moose.cli.common.OUTCOME_EXIT where the CLI has one), never a traceback
@@ -68,6 +68,13 @@ def test_moose_simulate_reports_the_collision(tmp_path: Path) -> None:
     assert "COLLISION" in proc.stdout
     summary = json.loads(out.read_text())
     assert summary["outcome"] == "collision" and summary["collided"] is True and summary["min_clearance_m"] < -0.5
+    # the figure (make run's): a PNG of the three panels with the danger zone drawn in red
+    import matplotlib.image
+
+    image = matplotlib.image.imread(figure)
+    assert image.shape[0] > image.shape[1] > 500  # three panels above each other
+    zone_red = np.array([0.8 * 214 + 0.2 * 255, 0.8 * 39 + 0.2 * 255, 0.8 * 40 + 0.2 * 255]) / 255  # tab:red, α 0.8
+    assert np.sum(np.all(np.abs(image[:, :, :3] - zone_red) < 0.02, axis=2)) > 200
 
 
 # -- the summary's other quantities, on hand-made runs whose answers are known
