@@ -181,3 +181,75 @@ def test_smoothness_of_a_known_steering_signal() -> None:
     assert nothing == {"steer_total_variation_rad": None, "time_at_steer_limit_s": None, "peak_steer_rate_rad_s": None}
     gappy = np.where(t > 1.5, np.nan, delta)
     assert smoothness(t, gappy, 0.1, 0.0)["time_at_steer_limit_s"] == pytest.approx(0.51, abs=1e-9)
+
+
+SUMMARY_KEYS = {
+    "scenario", "planner", "seed", "outcome", "reason", "collided", "lost_control", "left_field", "complete",
+    "passed_obstacle", "min_clearance_m", "max_abs_sideslip_rad", "max_abs_heading_rad", "mu", "mu_planning",
+    "tau_scenario_s", "tau_s", "nu", "w_m", "v_detect_mps", "paper_nu", "max_abs_steer_rad", "x_peak_steer_m",
+    "max_lateral_offset_m", "final_lateral_offset_m", "min_speed_mps", "max_speed_mps", "mpc_solve_ms",
+    "mpc_status_counts", "mean_weight_mpc", "duration_s", "steer_total_variation_rad", "time_at_steer_limit_s",
+    "peak_steer_rate_rad_s", "notes",
+}
+"""The summary's fields: what `moose simulate --json`, `moose launch --json`, the sweep's table and bag tools read."""
+
+
+def test_the_summary_has_exactly_its_documented_fields() -> None:
+    assert set(summarize(hand_made())) == SUMMARY_KEYS
+    zone = SCENARIO.danger_zone
+    threat = Threat(t=1.0, obstacle=zone, tau=1.9, w=1.2, nu=0.4, side=1, y_path=0.0)
+    assert set(summarize(hand_made(threat=threat))) == SUMMARY_KEYS
+    assert set(summarize(hand_made())["mpc_solve_ms"]) == {"median", "p95", "max", "count"}
+
+
+def test_a_detected_threat_fills_tau_nu_w_and_the_speed_at_detection() -> None:
+    zone = SCENARIO.danger_zone
+    threat = Threat(t=1.005, obstacle=zone, tau=1.9, w=1.2, nu=0.4, side=1, y_path=0.0)
+    result = hand_made(threat=threat)
+    result.trace["vx"] = 6.0 + result.trace["t"]  # the speed at detection: the first sample at or after t = 1.005
+    s = summarize(result)
+    assert (s["tau_s"], s["nu"], s["w_m"]) == (1.9, 0.4, 1.2)
+    assert s["v_detect_mps"] == pytest.approx(6.0 + 1.01)
+    assert s["min_speed_mps"] == pytest.approx(6.0) and s["max_speed_mps"] == pytest.approx(6.0 + END)
+    assert "nu" not in s["notes"] and "tau_s" not in s["notes"]
+
+
+def test_lateral_offsets_are_from_the_first_finite_sample() -> None:
+    result = hand_made(y=2.5)
+    y = result.trace["y"]
+    y[:3] = np.nan  # the first samples missing: offsets from the first finite one
+    y[3:] = 2.5 + np.sin(result.trace["t"][3:])
+    s = summarize(result)
+    offsets = y[3:] - y[3]
+    assert s["max_lateral_offset_m"] == pytest.approx(np.max(np.abs(offsets)))
+    assert s["final_lateral_offset_m"] == pytest.approx(offsets[-1])
+    assert s["final_lateral_offset_m"] < 0.0  # sin(4) < sin(0.03): signed, not absolute
+
+
+def test_every_non_finite_number_becomes_null_with_a_note() -> None:
+    from moose.metrics import _json_safe
+
+    notes: dict[str, str] = {}
+    value = {"a": float("nan"), "b": [1.0, np.float64("inf"), {"c": -np.inf}], "d": (np.int64(3), np.bool_(True)),
+             "e": "text", "f": np.float32(2.5)}
+    safe = _json_safe(value, notes)
+    assert safe == {"a": None, "b": [1.0, None, {"c": None}], "d": [3, True], "e": "text", "f": 2.5}
+    assert type(safe["d"][0]) is int and type(safe["d"][1]) is bool and type(safe["f"]) is float
+    assert notes == {"a": "not a finite number (nan)", "b": "not a finite number (inf)",
+                     "c": "not a finite number (-inf)"}
+    explained = {"a": "why"}
+    _json_safe({"a": float("nan")}, explained)
+    assert explained == {"a": "why"}  # a note that explains it already is kept
+    json.dumps(safe, allow_nan=False)
+
+
+def test_smoothness_boundaries() -> None:
+    t = np.array([0.0, 0.01])
+    two = smoothness(t, np.array([0.0, 0.01]), delta_max=0.3, t_from=0.0)  # two samples are enough
+    assert two["steer_total_variation_rad"] == pytest.approx(0.01) and two["peak_steer_rate_rad_s"] == pytest.approx(1.0)
+    # within 1 mrad of the limit counts, exactly 1 mrad too; the sample at t_from counts
+    t = np.arange(0.0, 0.05, 0.01)
+    delta = np.array([0.299, 0.2989, 0.3, 0.3, 0.3])
+    s = smoothness(t, delta, delta_max=0.3, t_from=0.0)
+    assert s["time_at_steer_limit_s"] == pytest.approx(0.03)  # 0.299 (exactly 1 mrad), 0.3, 0.3; not 0.2989
+    assert smoothness(t, delta, 0.3, t_from=0.01)["steer_total_variation_rad"] == pytest.approx(0.0011)
