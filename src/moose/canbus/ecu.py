@@ -28,7 +28,7 @@ class VehicleEcu:
     """Commands in, plant input out; sensor samples in, frames out."""
 
     def __init__(self, timeout: float = ECU_TIMEOUT, codec: Optional[Codec] = None) -> None:
-        if not (isinstance(timeout, (int, float)) and 0.0 < timeout < math.inf):
+        if isinstance(timeout, bool) or not (isinstance(timeout, (int, float)) and 0.0 < timeout < math.inf):
             raise ValueError(f"timeout = {timeout!r} is invalid: expected a positive number of seconds")
         self.codec = codec or Codec(node="VEHICLE")
         self.timeout = float(timeout)
