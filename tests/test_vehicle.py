@@ -286,3 +286,74 @@ def test_bad_input_is_refused() -> None:
         plant.step(np.zeros(3), 0)
     with pytest.raises(ValueError, match="state = "):
         plant.reset(np.zeros(4))
+
+
+def test_state_time_and_steps_of_the_plant_object() -> None:
+    plant = VehiclePlant(P)
+    start = initial_state(P, x=1.0, y=-2.0, theta=0.3, vx=6.0)
+    assert list(start) == pytest.approx([1.0, -2.0, 0.3, 6.0, 0.0, 0.0, 6.0 / P.r, 6.0 / P.r, 0.0])  # rolling wheels
+    plant.reset(start, t=4.0)
+    start[X] = 99.0
+    assert plant.state[X] == 1.0 and plant.t == 4.0  # reset copied the state
+    view = plant.state
+    view[X] = 50.0
+    assert plant.state[X] == 1.0  # the property is a copy
+    with pytest.raises(RuntimeError, match="after the first step"):
+        plant.specific_force
+    u = np.array([0.3, 80.0, 40.0])
+    chunked = plant.step(u, 23)  # two chunks of ten and three single steps
+    assert plant.t == pytest.approx(4.023)
+    single = VehiclePlant(P)
+    single.reset(initial_state(P, x=1.0, y=-2.0, theta=0.3, vx=6.0))
+    for _ in range(23):
+        single.step(u, 1)
+    assert chunked == pytest.approx(single.state, abs=1e-12)
+    assert plant.specific_force == pytest.approx(single.specific_force, abs=1e-12)
+    assert plant.step(u, np.int64(2)).shape == (9,)
+
+
+@pytest.mark.parametrize("n", [True, 1.0, -1, "2"])
+def test_a_bad_number_of_steps_is_refused(n: object) -> None:
+    with pytest.raises(ValueError, match=r"^n = .* is invalid: expected a positive number of steps$"):
+        VehiclePlant(P).step(np.zeros(3), n)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("u", [np.zeros(2), np.zeros((3, 1)), np.array([0.0, np.inf, 0.0])])
+def test_bad_inputs_are_refused(u: np.ndarray) -> None:
+    with pytest.raises(ValueError, match=r"(?s)^u = .* is invalid: expected 3 finite plant inputs$"):
+        VehiclePlant(P).step(u)
+
+
+@pytest.mark.parametrize("state", [np.zeros(8), np.full(9, np.nan)])
+def test_bad_states_are_refused(state: np.ndarray) -> None:
+    with pytest.raises(ValueError, match=r"(?s)^state = .* is invalid: expected 9 finite values$"):
+        VehiclePlant(P).reset(state)
+
+
+@pytest.mark.parametrize("dt", [0.0, -1e-3, math.inf, math.nan, "0.001"])
+def test_a_bad_step_is_refused(dt: object) -> None:
+    with pytest.raises(ParamError, match=r"^dt = .* is invalid: expected a positive step \(s\)$"):
+        VehiclePlant(P, dt=dt)  # type: ignore[arg-type]
+
+
+def test_the_stability_bound_of_the_step_is_sharp() -> None:
+    tau = slip_time_constant(P, P.v_low)
+    VehiclePlant(P, dt=RK4_LIMIT * tau * (1 - 1e-9))
+    with pytest.raises(ParamError, match="RK4 needs dt <"):
+        VehiclePlant(P, dt=RK4_LIMIT * tau)
+    # τ_λ grows with the slip denominator: v̄ / (k_x (r² / J + 2 / m)), k_x = μ F_zr / 2 · B_x C_x
+    assert slip_time_constant(P, 4.0) == pytest.approx(2.0 * slip_time_constant(P, 2.0))
+    assert slip_time_constant(VehicleParams(mu=0.4), 2.0) == pytest.approx(2.0 * tau)
+
+
+def test_steering_rests_at_the_stop_and_leaves_it_at_once() -> None:
+    plant = VehiclePlant(P)
+    state = initial_state(P, vx=5.0)
+    state[DELTA] = -P.delta_max
+    plant.reset(state)
+    assert plant.derivatives(plant.state, np.array([-0.5, 0.0, 0.0]))[DELTA] == 0.0  # pushing into the stop
+    assert plant.derivatives(plant.state, np.array([0.5, 0.0, 0.0]))[DELTA] == 0.5  # away from it
+    assert plant.derivatives(plant.state, np.array([9.0, 0.0, 0.0]))[DELTA] == P.delta_rate_max  # saturated
+    state[DELTA] = P.delta_max
+    assert VehiclePlant(P).derivatives(state, np.array([0.5, 0.0, 0.0]))[DELTA] == 0.0
+    assert VehiclePlant(P).derivatives(state, np.array([-9.0, 0.0, 0.0]))[DELTA] == -P.delta_rate_max
