@@ -83,13 +83,13 @@ class Obstacle:
 
     def clearance(self, x: ArrayLike, y: ArrayLike) -> Any:
         """Signed distance of the point(s) (x, y) to the box (m): outside, the Euclidean distance to the box;
-        inside, minus the distance to the nearest edge; zero on an edge.  A float for a point, an array for arrays."""
+        inside, minus the distance to the nearest edge; zero on an edge.  A float (``numpy.float64``) for a
+        point, an array for arrays; computed in double precision whatever the inputs' type."""
         x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
         dx = np.maximum(self.x_min - x, x - self.x_max)
         dy = np.maximum(self.y_min - y, y - self.y_max)
         # the box's signed distance function: the distance outside plus the (negative) depth inside
-        gap = np.hypot(np.maximum(dx, 0.0), np.maximum(dy, 0.0)) + np.minimum(np.maximum(dx, dy), 0.0)
-        return float(gap) if gap.ndim == 0 else gap
+        return np.hypot(np.maximum(dx, 0.0), np.maximum(dy, 0.0)) + np.minimum(np.maximum(dx, dy), 0.0)
 
 
 @dataclasses.dataclass(frozen=True)
