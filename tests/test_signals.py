@@ -57,6 +57,18 @@ def test_clearance_equals_the_independent_formula(x: float, y: float, x0: float,
     assert box.contains(x, y) == (box.x_min <= x <= box.x_max and box.y_min <= y <= box.y_max)
 
 
+def test_clearance_is_computed_in_double_precision() -> None:
+    box = Obstacle(0.1, 0.2, 0.1, 0.2)  # edges single precision cannot hold
+    x, y = np.float32(5.3), np.float32(7.7)  # single-precision positions (a float32 log): exact in double
+    expected = math.hypot(float(x) - 0.2, float(y) - 0.2)
+    for xs, ys in ((x, y), (np.array([x]), np.array([y]))):
+        assert float(np.ravel(box.clearance(xs, ys))[0]) == pytest.approx(expected, rel=1e-14, abs=0.0)
+        assert float(np.ravel(box.clearance(xs, float(y)))[0]) == pytest.approx(expected, rel=1e-14, abs=0.0)
+        assert float(np.ravel(box.clearance(float(x), ys))[0]) == pytest.approx(expected, rel=1e-14, abs=0.0)
+    assert box.clearance(np.array([x]), np.array([y])).dtype == np.float64
+    assert ZONE.clearance(17, 6) == 5.0 and ZONE.clearance([17], [6]).dtype == np.float64  # integers too
+
+
 def test_clearance_of_arrays_is_elementwise() -> None:
     xs = np.array([21.0, 21.0, 18.0, 17.0])
     ys = np.array([0.0, 3.0, 0.0, 6.0])
