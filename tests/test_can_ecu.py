@@ -30,6 +30,7 @@ def read(frame: can.Message) -> tuple[str, dict]:
 
 def test_commands_drive_their_own_actuators_until_each_times_out() -> None:
     ecu = VehicleEcu(timeout=0.05)
+    assert not ecu.steering_alive(0.0) and not ecu.torque_alive(0.0)
     assert list(ecu.plant_input(0.0)) == [0.0, 0.0, 0.0]  # nothing received: EPS still, no torque
     ecu.on_frame(command("CMD_STEER", 0, SteerAngleCmd=0.1, SteerRateCmd=0.4), 1.0)
     ecu.on_frame(command("CMD_TORQUE", 0, TorqueRL=30.0, TorqueRR=-12.5), 1.02)
@@ -89,10 +90,17 @@ def test_sensor_values_beyond_the_dbc_range_saturate_and_non_finite_ones_are_not
     imu = DB.get_message_by_name("IMU").get_signal_by_name("YawRate")
     (name, values), = [read(f) for f in ecu.encode(ImuSample(0.0, 0.0, 0.0, 1e6), 0.0)]
     assert values["YawRate"] == pytest.approx(imu.maximum, abs=abs(imu.scale))
-    assert ecu.encode(ImuSample(0.0, math.nan, 0.0, 0.0), 0.0) == [] and ecu.unsendable == 1
-    assert ecu.encode(GpsSample(1.0, 0.8, math.inf, 0.0, 0.0, 0.0), 1.0) == [] and ecu.unsendable == 2
-    assert ecu.encode(WheelSpeedSample(0.0, math.nan, 1.0), 0.0) == [] and ecu.unsendable == 3
-    assert ecu.encode(EpsSample(0.0, math.inf), 0.0) == [] and ecu.unsendable == 4
+    (name, values), = [read(f) for f in ecu.encode(WheelSpeedSample(0.0, -1e4, 1e4), 0.0)]
+    assert (values["OmegaRL"], values["OmegaRR"]) == pytest.approx((-300.0, 300.0))
+    (name, values), = [read(f) for f in ecu.encode(EpsSample(0.0, 2.0), 0.0)]
+    assert values["SteerAngle"] == pytest.approx(0.5)
+    position, velocity = [read(f)[1] for f in ecu.encode(GpsSample(1.0, -100.0, 1e9, -1e9, 99.0, -99.0), 1.0)]
+    assert (position["PosX"], position["PosY"]) == pytest.approx((134217.727, -134217.728))
+    assert (velocity["VelX"], velocity["VelY"], velocity["FixAge"]) == pytest.approx((30.0, -30.0, 60.0))
+    unsendable = [ImuSample(0.0, math.nan, 0.0, 0.0), WheelSpeedSample(0.0, math.nan, 1.0), EpsSample(0.0, math.inf),
+                  GpsSample(1.0, 0.8, math.inf, 0.0, 0.0, 0.0), GpsSample(1.0, math.nan, 1.0, 0.0, 0.0, 0.0)]
+    for k, sample in enumerate(unsendable, start=1):
+        assert ecu.encode(sample, 1.0) == [] and ecu.unsendable == k
     with pytest.raises(TypeError, match="has no frame"):
         ecu.encode(object(), 0.0)
 
