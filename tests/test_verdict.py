@@ -275,12 +275,17 @@ def test_finite_or_none() -> None:
     assert finite_or_none(0.0) == 0.0
 
 
-@settings(max_examples=400, deadline=None)
-@given(*[st.integers(-4, 26) for _ in range(4)])
-def test_segment_box_test_equals_the_separating_axis_test(x0: int, y0: int, x1: int, y1: int) -> None:
-    """Integer coordinates against the zone [20, 22] × [−2, 2]: touching (an end on an edge, a segment along an
-    edge, through a corner) is frequent.  The reference: a segment and a closed box intersect iff their bounding
-    boxes overlap and the box's corners are not all strictly on one side of the segment's line."""
+quarter = st.integers(-16, 104).map(lambda v: v / 4)  # a 0.25 m grid: exact in binary, short segments too
+
+
+@settings(max_examples=600, deadline=None)
+@given(st.one_of(st.tuples(*[st.integers(-4, 26) for _ in range(4)]), st.tuples(quarter, quarter, quarter, quarter)))
+def test_segment_box_test_equals_the_separating_axis_test(segment: tuple) -> None:
+    """Coordinates on a 1 m and a 0.25 m grid against the zone [20, 22] × [−2, 2]: touching (an end on an edge,
+    a segment along an edge, through a corner) is frequent, and so are segments shorter than a metre.  The
+    reference: a segment and a closed box intersect iff their bounding boxes overlap and the box's corners are not
+    all strictly on one side of the segment's line."""
+    x0, y0, x1, y1 = segment
     box = ZONE
     overlap = min(x0, x1) <= box.x_max and max(x0, x1) >= box.x_min and min(y0, y1) <= box.y_max and max(y0, y1) >= box.y_min
     sides = [(x1 - x0) * (cy - y0) - (y1 - y0) * (cx - x0) for cx in (box.x_min, box.x_max) for cy in (box.y_min, box.y_max)]
