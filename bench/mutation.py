@@ -6,7 +6,8 @@
     python bench/mutation.py --docs             # ... and write it into docs/design.md
 
 Each module is mutated in a temporary copy of the working tree (so the tree itself never holds a
-mutant), with ``mutmut run`` over the module's tests (:data:`MODULES`, without the ``graph`` tests);
+mutant), with ``mutmut run`` over the module's tests (:data:`MODULES`, without the ``graph`` and ``slow`` ones, which
+run subprocesses that import the unmutated package);
 mutmut maps every mutant to the tests that execute its function and runs only those.  The result of
 each module — counts and every surviving mutant's diff — is stored in
 ``bench/results/mutation/<module>.json``; the table is made from those files, so a module can be
@@ -97,7 +98,8 @@ def configure(dest: Path, module: str, tests: list[str]) -> None:
     missing = [t for t in tests if not (dest / "tests" / t).exists()]
     if missing:
         raise SystemExit(f"mutation: error: tests of {module} not found: {missing}")
-    selection = [f"tests/{t}" for t in tests] + ["-m", "not graph"]
+    # in-process tests only: a node or CLI subprocess imports the unmutated package (and takes seconds)
+    selection = [f"tests/{t}" for t in tests] + ["-m", "not graph and not slow"]
     config = (
         "\n[tool.mutmut]\n"
         'source_paths = ["src/"]\n'

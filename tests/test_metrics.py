@@ -55,6 +55,7 @@ def test_a_scenario_that_must_collide_is_a_collision_in_the_summary(collision: S
     assert s["passed_obstacle"] is bool(np.any(tr["x"] > zone.x_max))
 
 
+@pytest.mark.slow
 def test_moose_simulate_reports_the_collision(tmp_path: Path) -> None:
     out, figure = tmp_path / "summary.json", tmp_path / "figure.png"
     proc = subprocess.run([sys.executable, "-m", "moose.cli", "simulate", "--speed", str(SPEED), "--tau", str(TAU),
