@@ -254,3 +254,58 @@ def test_smoothness_boundaries() -> None:
     s = smoothness(t, delta, delta_max=0.3, t_from=0.0)
     assert s["time_at_steer_limit_s"] == pytest.approx(0.03)  # 0.299 (exactly 1 mrad), 0.3, 0.3; not 0.2989
     assert smoothness(t, delta, 0.3, t_from=0.01)["steer_total_variation_rad"] == pytest.approx(0.0011)
+
+
+def test_a_run_without_any_sample_is_incomplete_with_every_quantity_null_and_explained() -> None:
+    """The launcher's case when no odometry arrived: nothing is made up."""
+    result = hand_made()
+    result.trace = {k: a[:0] for k, a in result.trace.items()}
+    s = summarize(result)
+    assert s["outcome"] == "incomplete" and s["reason"] == "no samples of the vehicle state"
+    for key in ("min_clearance_m", "max_abs_steer_rad", "max_lateral_offset_m", "final_lateral_offset_m",
+                "min_speed_mps", "max_speed_mps", "duration_s", "steer_total_variation_rad"):
+        assert s[key] is None, key
+    assert set(s["notes"]) == {"tau_s", "nu", "mean_weight_mpc"}  # a None that is no failure has no note of its own
+    json.dumps(s, allow_nan=False)
+
+
+def test_missing_values_are_null_without_a_spurious_note() -> None:
+    result = hand_made()
+    for key in ("vx", "delta"):
+        result.trace[key] = np.full_like(result.trace["t"], np.nan)
+    s = summarize(result)
+    assert s["min_speed_mps"] is s["max_speed_mps"] is s["max_abs_steer_rad"] is None
+    assert not {"min_speed_mps", "max_speed_mps", "max_abs_steer_rad", "median"} & set(s["notes"])
+
+
+def test_the_speed_at_detection_is_the_sample_at_the_detection_time() -> None:
+    zone = SCENARIO.danger_zone
+    result = hand_made(threat=Threat(t=1.0, obstacle=zone, tau=1.9, w=1.2, nu=0.4, side=1, y_path=0.0))
+    result.trace["vx"] = 6.0 + result.trace["t"]
+    assert result.trace["t"][100] == 1.0
+    assert summarize(result)["v_detect_mps"] == 7.0  # the sample at exactly t = 1.0 s, not the next one
+
+
+def test_the_configured_verdict_thresholds_are_used() -> None:
+    import dataclasses
+
+    from moose.schema import VerdictParams
+
+    result = hand_made()
+    result.trace["vy"] = np.full_like(result.trace["t"], 0.3)  # β = 0.05 rad
+    assert summarize(result)["outcome"] == "clear"
+    result.config = dataclasses.replace(CONFIG, verdict=VerdictParams(sideslip_max=0.04))
+    assert summarize(result)["outcome"] == "lost_control"
+
+
+def test_notes_say_why_tau_nu_and_the_weight_are_null() -> None:
+    zone = SCENARIO.danger_zone
+    past = summarize(hand_made(threat=Threat(t=1.0, obstacle=zone, tau=-0.5, w=1.2, nu=math.inf, side=1, y_path=0.0)))
+    assert past["notes"]["nu"] == "no lateral displacement is possible before the obstacle (τ ≤ 0 or v_x ≤ 0)"
+    receding = summarize(hand_made(threat=Threat(t=1.0, obstacle=zone, tau=math.inf, w=1.2, nu=0.0, side=1, y_path=0.0)))
+    assert receding["notes"]["tau_s"] == "the car was not closing in on the obstacle (v_x ≤ 0)"
+    threat = Threat(t=1.0, obstacle=zone, tau=1.9, w=1.2, nu=0.4, side=1, y_path=0.0)
+    unweighted = summarize(hand_made(threat=threat, planning=[plan(1.0, "converged", 10.0, float("nan"), threat),
+                                                              plan(1.2, "converged", 10.0, 0.9, None)]))
+    assert unweighted["mean_weight_mpc"] is None  # the step without a threat does not count
+    assert unweighted["notes"]["mean_weight_mpc"] == "no planning step with a threat recorded a weight"
