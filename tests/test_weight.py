@@ -223,3 +223,14 @@ def test_steering_usage_looks_at_most_at_the_plan_it_has() -> None:
     p = rotated_plan(0.0, 5.0, along=0.0, normal=1.0)
     assert f.steering_usage(p, StateEstimate(0.0, 0.0, 0.0, 0.0, 5.0, 0.0, 0.0, 0.0)) == pytest.approx(
         VEHICLE.wheelbase * 1.0 / 25.0 / VEHICLE.delta_max)
+
+
+def test_the_first_step_counts_with_the_fbl_steering_not_the_kinematic_one() -> None:
+    """Row 0 is the δ* the FBL computes (the paper's δ_MPC): at straight running the front tyre alone gives the
+    lateral force, m a_y / C_f — less than the kinematic L a_y / v² of later rows at this speed."""
+    fbl = FeedbackLinearization(FblParams(), VEHICLE, 0.2)
+    first_only = plan(1.0)
+    first_only.accel[1:] = 0.0
+    expected = abs(fbl.reference(first_only.accel[0], EST).delta) / VEHICLE.delta_max
+    assert wf(n_rho=3).steering_usage(first_only, EST) == pytest.approx(expected, rel=1e-12)
+    assert expected < VEHICLE.wheelbase * 1.0 / 7.0**2 / VEHICLE.delta_max  # the kinematic value would be larger
