@@ -44,6 +44,14 @@ def test_commands_drive_their_own_actuators_until_each_times_out() -> None:
     assert list(ecu.plant_input(1.1)) == pytest.approx([0.0, 5.0, 6.0])
 
 
+def test_the_timeouts_allow_a_nanosecond_of_round_off() -> None:
+    ecu = VehicleEcu(timeout=0.05)
+    ecu.on_frame(command("CMD_STEER", 0, SteerAngleCmd=0.0, SteerRateCmd=0.2), 0.0)
+    ecu.on_frame(command("CMD_TORQUE", 0, TorqueRL=1.0, TorqueRR=1.0), 0.0)
+    assert ecu.steering_alive(0.05 + 1e-9) and ecu.torque_alive(0.05 + 1e-9)
+    assert not ecu.steering_alive(0.05 + 2e-9) and not ecu.torque_alive(0.05 + 2e-9)
+
+
 def test_a_frame_the_ecu_refuses_does_not_refresh_the_command() -> None:
     ecu = VehicleEcu()
     ecu.on_frame(command("CMD_TORQUE", 0, TorqueRL=40.0, TorqueRR=40.0), 0.0)
