@@ -1,4 +1,4 @@
-"""The ``vehicle_simulator`` node on its actuator topic: a command older than ``command_timeout`` stops acting.
+"""The ``vehicle_simulator`` node on its actuator topic: a command older than ``command_timeout`` stops driving.
 
 The real node class on a real Cyclone DDS participant (this run's domain); its simulated time is advanced
 step by step by the test (its wall-clock timer is set 10 s apart, so it never fires), and the command comes
@@ -65,8 +65,11 @@ def test_a_command_older_than_the_timeout_stops_driving_the_plant() -> None:
     driven = [reference.step(np.array([0.0, TORQUE, TORQUE]), sim.steps) for _ in range(steps)]
     coasted = [reference.step(np.zeros(3), sim.steps) for _ in range(100 - steps)]
     expected = np.array(driven + coasted)
-    # the command arrived and acted: the wheels spun up as under the reference's first steps
-    assert states[steps - 1, OMEGA_RL] == pytest.approx(expected[steps - 1, OMEGA_RL], rel=1e-6)
-    assert states[steps - 1, VX] > before[VX] + 0.02
-    # and it stopped acting after the timeout: no more drive than the reference had (the simulator may brake)
+    # the command arrived and acted: the car sped up (the whole command, or a rate-limited part of it)
+    assert np.max(states[:, VX]) > before[VX] + 0.01 and np.max(states[:, OMEGA_RL]) > before[OMEGA_RL] + 0.1
+    # and it stopped acting after the timeout: never more drive than the command held for the timeout gives
+    # (the simulator may limit the torque's rate, or brake once the command is stale)
     assert np.all(states[steps:, VX] <= expected[steps:, VX] + 1e-6)
+    held = VehiclePlant(sim.plant.params, dt=sim.plant.dt)  # what ignoring the timeout would have done
+    held.reset(before)
+    assert held.step(np.array([0.0, TORQUE, TORQUE]), 100 * sim.steps)[VX] > expected[-1, VX] + 1.0
