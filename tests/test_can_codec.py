@@ -117,7 +117,7 @@ def test_an_extended_remote_or_fd_frame_on_a_dbc_identifier_is_not_decoded(kind:
     valid = eps_frame(100, 0)
     frame = can.Message(arbitration_id=0x200, data=valid.data, is_extended_id=kind == "extended",
                         is_remote_frame=kind == "remote", is_fd=kind == "fd", dlc=4)
-    assert codec.decode(frame) is None and codec.stats.unknown_id == 1
+    assert codec.decode(frame) is None and codec.decode(frame) is None and codec.stats.unknown_id == 2
     assert codec.decode(valid) is not None  # the same content as a classic data frame is fine
 
 
