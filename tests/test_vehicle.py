@@ -357,3 +357,33 @@ def test_steering_rests_at_the_stop_and_leaves_it_at_once() -> None:
     state[DELTA] = P.delta_max
     assert VehiclePlant(P).derivatives(state, np.array([0.5, 0.0, 0.0]))[DELTA] == 0.0
     assert VehiclePlant(P).derivatives(state, np.array([-9.0, 0.0, 0.0]))[DELTA] == -P.delta_rate_max
+
+
+def test_a_new_plant_is_at_rest_at_time_zero_with_no_force_yet() -> None:
+    plant = VehiclePlant(P)
+    assert plant.t == 0.0 and list(plant.state) == [0.0] * 9
+    with pytest.raises(RuntimeError, match="after the first step"):
+        plant.specific_force
+    plant.reset([0, 0, 0, 5, 0, 0, 16, 16, 0])  # integers are taken as numbers
+    assert plant.state.dtype == np.float64
+    before = plant.t
+    plant.step(np.zeros(3))  # one step by default
+    assert plant.t == pytest.approx(before + plant.dt)
+
+
+def test_the_casadi_step_is_the_plants_step() -> None:
+    from moose.vehicle import rk4_step_function, vehicle_vector
+
+    plant = VehiclePlant(P)
+    start = initial_state(P, vx=6.0)
+    plant.reset(start)
+    u = np.array([0.4, 70.0, -20.0])
+    expected = plant.step(u, 1)
+    step = np.asarray(rk4_step_function()(start, u, vehicle_vector(P), plant.dt), dtype=float).ravel()
+    assert step == pytest.approx(expected, abs=1e-12)
+
+
+def test_the_refused_step_names_the_bound() -> None:
+    bound = RK4_LIMIT * slip_time_constant(P, P.v_low)
+    with pytest.raises(ParamError, match=rf"RK4 needs dt < {bound:.3g} s for the wheel-slip time constant"):
+        VehiclePlant(P, dt=0.02)
