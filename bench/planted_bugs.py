@@ -24,7 +24,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from mutation import ROOT, copy_tree
+from mutation import copy_tree
 
 
 @dataclasses.dataclass(frozen=True)

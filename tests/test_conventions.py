@@ -24,7 +24,7 @@ from moose.params import VehicleParams
 from moose.schema import FblParams, MotionParams, SensorParams
 from moose.sensors import Sensors
 from moose.signals import EpsSample, ImuSample, Reference, StateEstimate, WheelSpeedSample
-from moose.vehicle import DELTA, GAMMA, OMEGA_RL, OMEGA_RR, THETA, VX, Y, VehiclePlant, initial_state
+from moose.vehicle import DELTA, GAMMA, THETA, VX, Y, VehiclePlant, initial_state
 
 pytestmark = [pytest.mark.can]
 
