@@ -309,3 +309,14 @@ def test_notes_say_why_tau_nu_and_the_weight_are_null() -> None:
                                                               plan(1.2, "converged", 10.0, 0.9, None)]))
     assert unweighted["mean_weight_mpc"] is None  # the step without a threat does not count
     assert unweighted["notes"]["mean_weight_mpc"] == "no planning step with a threat recorded a weight"
+
+
+def test_idle_planning_steps_are_no_threat_and_nothing_warns() -> None:
+    import warnings
+
+    idle = [plan(0.2 * k, "converged", 10.0, 0.0, None) for k in range(5)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no mean of an empty list, no NaN arithmetic behind a null
+        s = summarize(hand_made(planning=idle))
+    assert s["mean_weight_mpc"] is None and s["notes"]["mean_weight_mpc"] == "no planning step had a threat"
+    assert s["mpc_solve_ms"]["count"] == 5
