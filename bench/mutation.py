@@ -37,6 +37,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from importlib.metadata import version
 from pathlib import Path
 from typing import Any
 
@@ -170,7 +171,9 @@ def run_module(module: str, jobs: int, keep: bool) -> dict[str, Any]:
     counts: dict[str, int] = {}
     for status in statuses.values():
         counts[status] = counts.get(status, 0) + 1
-    return {"module": module, "tests": tests, "total": len(statuses), "counts": counts, "survivors": survivors,
+    commit = subprocess.run(["git", "describe", "--always", "--dirty"], cwd=ROOT, capture_output=True, text=True)
+    return {"module": module, "commit": commit.stdout.strip(), "mutmut": version("mutmut"), "tests": tests,
+            "total": len(statuses), "counts": counts, "survivors": survivors,
             "seconds": round(time.monotonic() - started, 1)}
 
 
@@ -202,11 +205,12 @@ def row(result: dict[str, Any], equivalent: list[dict[str, Any]]) -> dict[str, A
 
 
 def table(rows: list[dict[str, Any]]) -> str:
-    lines = ["| module | mutants | killed | equivalent | not killed, reason given | unexplained | score |",
-             "|---|---:|---:|---:|---:|---:|---:|"]
+    lines = ["| module | mutants | killed | equivalent | not killed, reason given | unexplained | score | killed of all |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         lines.append(f"| `moose/{r['module'].replace('.', '/')}.py` | {r['total']} | {r['killed']} | {r['equivalent']} "
-                     f"| {r['accepted']} | {r['unexplained']} | {100 * r['score']:.1f} % |")
+                     f"| {r['accepted']} | {r['unexplained']} | {100 * r['score']:.1f} % "
+                     f"| {100 * r['killed'] / r['total']:.1f} % |")
     return "\n".join(lines)
 
 
@@ -240,6 +244,8 @@ def main(argv: list[str] | None = None) -> int:
     results = [json.loads((RESULTS / f"{m}.json").read_text()) for m in MODULES if (RESULTS / f"{m}.json").exists()]
     rows = [row(r, equivalent) for r in results]
     text = table(rows)
+    commits = sorted({r.get("commit", "?") for r in results})
+    text += f"\n\nRun on {', '.join(commits)} with mutmut {', '.join(sorted({r.get('mutmut', '?') for r in results}))}."
     print(text)
     for result in results:
         for survivor, _ in classify(result, equivalent)[1]:
