@@ -153,7 +153,9 @@ def test_full_graph_reproduces_the_lockstep_outcome() -> None:
 
 
 def test_killed_planner_is_reported_and_the_graph_keeps_running() -> None:
-    scenario = load_scenario("paper_v6_w2.0")
+    import dataclasses
+
+    scenario = dataclasses.replace(load_scenario("paper_v6_w2.0"), duration=4.0)  # the run the nodes are given
     out = io.StringIO()
     summary = launch(scenario, {"scenario": "paper_v6_w2.0", "duration": 4.0},
                      kill_after=("mpc_planner", 2.0), out=out)  # killed 1 s after the obstacle appeared
