@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from moose.schema import VerdictParams
@@ -280,6 +280,11 @@ quarter = st.integers(-16, 104).map(lambda v: v / 4)  # a 0.25 m grid: exact in 
 
 @settings(max_examples=600, deadline=None)
 @given(st.one_of(st.tuples(*[st.integers(-4, 26) for _ in range(4)]), st.tuples(quarter, quarter, quarter, quarter)))
+@example((18, 0, 20, 0))  # ends on the near edge: a touch
+@example((19, 3, 21, 1))  # through the corner (20, 2) only
+@example((19.5, 0.0, 20.25, 0.0))  # shorter than a metre, into the zone
+@example((21.0, -2.75, 21.0, -2.25))  # short, just outside
+@example((20, 2, 22, 2))  # along an edge
 def test_segment_box_test_equals_the_separating_axis_test(segment: tuple) -> None:
     """Coordinates on a 1 m and a 0.25 m grid against the zone [20, 22] × [−2, 2]: touching (an end on an edge,
     a segment along an edge, through a corner) is frequent, and so are segments shorter than a metre.  The
