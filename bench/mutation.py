@@ -6,20 +6,21 @@
     python bench/mutation.py --docs             # ... and write it into docs/design.md
 
 Each module is mutated in a temporary copy of the working tree (so the tree itself never holds a
-mutant), with ``mutmut run`` over the module's tests (:data:`MODULES`, without the ``graph`` and ``slow`` ones, which
-run subprocesses that import the unmutated package);
-mutmut maps every mutant to the tests that execute its function and runs only those.  The result of
-each module — counts and every surviving mutant's diff — is stored in
-``bench/results/mutation/<module>.json``; the table is made from those files, so a module can be
-re-run alone.  A survivor is either killed by a test or listed in ``bench/mutation_equivalent.yaml``
-with the reason it cannot be killed (an equivalent mutant: no input tells it from the original); a
-survivor that is neither is an ``unexplained`` one and makes the exit status 1.
+mutant), with ``mutmut run`` over the module's tests (:data:`MODULES`, without the ``graph`` and
+``slow`` ones, which run subprocesses that import the unmutated package); mutmut maps every mutant to
+the tests that execute its function and runs only those.  The result of each module — counts and
+every surviving mutant's diff — is stored in ``bench/results/mutation/<module>.json``; the table is
+made from those files, so a module can be re-run alone.  A survivor is either killed by a test or
+listed in ``bench/mutation_equivalent.yaml`` with the reason it cannot be killed (an equivalent
+mutant: no input tells it from the original); a survivor that is neither is an ``unexplained`` one
+and makes the exit status 1.
 
 Score = killed / (mutants − equivalent), killed including timeouts (a mutant that makes a test hang
-is detected).  An entry of the list with ``kind: accepted`` is a survivor that is *not* equivalent but is not
-killed, with the reason (e.g. a floating-point boundary no realistic input reaches); it stays in the score's
-denominator, so only proven equivalents raise the score.  Module-level constants and dataclass defaults are not mutated by mutmut (it mutates
-function bodies); those are checked by the parameter tests.
+is detected).  An entry of the list with ``kind: accepted`` is a survivor that is *not* equivalent
+but is not killed, with the reason (e.g. a floating-point boundary no realistic input reaches); it
+stays in the score's denominator, so only proven equivalents raise the score.  Module-level
+constants and dataclass defaults are not mutated by mutmut (it mutates function bodies); those are
+checked by the parameter tests.
 
 Caches: a function cached with ``functools.lru_cache`` (the plant's compiled RK4, the EKF's, the
 DBC) would keep the first test's result — built from unmutated code — for the rest of the process,
