@@ -1,13 +1,67 @@
-"""Test-run isolation: a DDS domain of our own on loopback only, and a private compile cache."""
+"""Test-run isolation: a DDS domain of our own on loopback only, a private compile cache, and no process that
+outlives the run."""
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
+import uuid
 from pathlib import Path
+from typing import Iterator
 
 import pytest
 
 from isolation import claim_domain
 from ros2_prefix import dds_env, ros_env  # noqa: F401 - fixtures of the ROS 2 prefix tests
+
+SESSION_MARK = "MOOSE_TEST_SESSION"
+"""Environment variable every process a test run starts inherits: the run's own mark."""
+
+REAPER = r'''
+import os, signal, sys, time
+mark = sys.argv[1].encode()
+sys.stdin.buffer.read()  # end of file: the test run ended, normally or killed (the kernel closes the pipe)
+me = os.getpid()
+
+def marked():
+    pids = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit() and int(entry) != me:
+            try:
+                with open(f"/proc/{entry}/environ", "rb") as f:
+                    if mark in f.read().split(b"\0"):
+                        pids.append(int(entry))
+            except OSError:
+                pass
+    return pids
+
+for sig, grace in ((signal.SIGTERM, 3.0), (signal.SIGKILL, 1.0)):
+    pids = marked()
+    for pid in pids:
+        try:
+            os.kill(pid, sig)
+        except OSError:
+            pass
+    deadline = time.monotonic() + grace
+    while pids and time.monotonic() < deadline:
+        time.sleep(0.05)
+        pids = marked()
+'''
+
+
+@pytest.fixture(scope="session", autouse=True)
+def reaper() -> Iterator[None]:
+    """Every process started by this test run (and its children, whatever process group they chose) carries
+    :data:`SESSION_MARK` in its environment; a reaper outside the run's process group waits for the run to end —
+    also a SIGKILLed one — and then ends every process with the mark still running (SIGTERM, then SIGKILL)."""
+    mark = f"{SESSION_MARK}={uuid.uuid4().hex}"
+    key, value = mark.split("=", 1)
+    os.environ[key] = value
+    proc = subprocess.Popen([sys.executable, "-c", REAPER, mark], stdin=subprocess.PIPE, start_new_session=True)
+    yield
+    assert proc.stdin is not None
+    proc.stdin.close()  # the run is over: end what it left behind
+    proc.wait(timeout=30)
 
 
 @pytest.fixture(scope="session", autouse=True)

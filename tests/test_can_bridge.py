@@ -398,3 +398,24 @@ def test_lost_commands_lead_the_frames_into_the_minimum_risk_maneuver() -> None:
     assert torque[first] == pytest.approx(130.0) and min(torque.values()) == pytest.approx(-GUARD.brake_torque)
     assert frames_by_t[0.3]["BRIDGE_HEARTBEAT"]["State"] == 1
     assert frames_by_t[0.3]["BRIDGE_STATUS"]["CommandTimeout"] == 1
+
+
+
+def test_each_command_field_travels_in_its_own_signal_to_its_own_actuator() -> None:
+    """Four different values, so a swap of any two (rear left/right, angle/rate) shows: the frames read back by
+    cantools with the DBC (not by the bridge's codec), and the ECU's plant input U = [δ̇_cmd, T_rl, T_rr]."""
+    bridge, ecu = BridgeCore(GUARD), VehicleEcu()
+    command = Command(steering_angle=0.012, steering_rate=0.25, torque_rl=13.0, torque_rr=-7.0)
+    for k in range(5):  # inside the rate limits from rest: reached in the first command period
+        t = round(0.01 * k, 9)
+        bridge.on_command(command, t)
+        frames = bridge.command_frames(t)
+        for frame in frames:
+            ecu.on_frame(frame, t)
+    wire = {DB.get_message_by_frame_id(f.arbitration_id).name: DB.decode_message(f.arbitration_id, f.data)
+            for f in frames}
+    assert wire["CMD_STEER"]["SteerAngleCmd"] == pytest.approx(0.012, abs=1e-4)
+    assert wire["CMD_STEER"]["SteerRateCmd"] == pytest.approx(0.25, abs=1e-3)
+    assert wire["CMD_TORQUE"]["TorqueRL"] == pytest.approx(13.0, abs=0.01)
+    assert wire["CMD_TORQUE"]["TorqueRR"] == pytest.approx(-7.0, abs=0.01)
+    assert list(ecu.plant_input(0.04)) == pytest.approx([0.25, 13.0, -7.0], abs=0.01)

@@ -116,3 +116,40 @@ def test_dump_checks_its_count_and_duration(bus) -> None:
     for kwargs, field in (({"count": 0}, "count"), ({"count": 2.5}, "count"), ({"duration": float("inf")}, "duration")):
         with pytest.raises(ParamError, match=rf"{field} = "):
             dump(bus, io.StringIO(), **kwargs)
+
+
+@pytest.mark.can
+def test_moose_can_replay_and_dump_over_udp_multicast_from_the_command_line(tmp_path) -> None:
+    """Two processes, as a user runs them: ``moose can dump`` decodes what ``moose can replay`` sends."""
+    import subprocess
+    import sys
+    import time
+
+    from isolation import claim_udp_port
+
+    log = tmp_path / "drive.log"
+    good_log(log, frames=5)
+    pid = os.getpid()
+    bus = ["--interface", "udp_multicast", "--channel", f"239.74.{pid % 250}.{1 + pid % 199}",
+           "--port", str(claim_udp_port())]
+    moose = [sys.executable, "-m", "moose.cli", "can"]
+    dumper = subprocess.Popen(moose + ["dump", "--count", "5", "--duration", "60", *bus], stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(3.0)  # the dump has joined the group
+        sent = subprocess.run(moose + ["replay", str(log), "--rate", "10", *bus], capture_output=True, text=True,
+                              timeout=60)
+        assert sent.returncode == 0 and sent.stdout.strip() == "sent 5 frames", sent.stderr
+        out, err = dumper.communicate(timeout=60)
+    finally:
+        if dumper.poll() is None:
+            dumper.kill()
+            dumper.wait()
+    assert dumper.returncode == 0, err
+    lines = [line for line in out.splitlines() if " IMU " in line]
+    assert len(lines) == 5
+    assert [float(re.search(r"YawRate=(\S+)", line).group(1)) for line in lines] == pytest.approx(
+        [0.0, 0.01, 0.02, 0.03, 0.04], abs=1e-3)
+    missing = subprocess.run(moose + ["replay", str(tmp_path / "none.log"), *bus], capture_output=True, text=True,
+                             timeout=60)
+    assert missing.returncode == 2 and missing.stderr.startswith("moose: error:") and "none.log" in missing.stderr

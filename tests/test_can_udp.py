@@ -23,6 +23,7 @@ from typing import Any
 
 import pytest
 
+from isolation import claim_udp_port
 from moose.canbus.bus import BusParams, LoopbackMulticastBus
 from moose.canbus.runner import BridgeParams, BridgeRunner
 from moose.canbus.safety import Command
@@ -82,12 +83,9 @@ print(json.dumps({"accepted": accepted, "bad_checksum": s.bad_checksum, "bad_cou
 
 
 def unique_group_and_port() -> tuple[str, int]:
+    """A random group, and a port free now and locked for this run (tests/isolation.py: no concurrent run takes it)."""
     r = secrets.token_bytes(3)
-    group = f"239.{192 + (r[0] & 3)}.{r[1]}.{max(r[2], 1)}"
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:  # a port no one is bound to now
-        probe.bind(("", 0))
-        port = probe.getsockname()[1]
-    return group, port
+    return f"239.{192 + (r[0] & 3)}.{r[1]}.{max(r[2], 1)}", claim_udp_port()
 
 
 class Sniffer:

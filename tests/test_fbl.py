@@ -35,7 +35,13 @@ def test_round_trip_recovers_the_steering_angle(delta: float, vy: float, gamma: 
     accel, estimate = global_acceleration(delta, vy, gamma, theta)
     fbl = FeedbackLinearization(FblParams(), P, 0.2)
     # the plant keeps cos(delta) and the small -F_yf sin(delta) term; the FBL uses eq. (eomdyn)
-    assert fbl.reference(accel, estimate).delta == pytest.approx(delta, abs=0.004)
+    reference = fbl.reference(accel, estimate)
+    assert reference.delta == pytest.approx(delta, abs=0.004)
+    # the speed reference is v_x one planning period ahead at the plant's own v̇_x (eq. (dvxnl): a_x + v_y γ)
+    state = initial_state(P, vx=7.0)
+    state[[DELTA, VY, GAMMA, THETA]] = delta, vy, gamma, theta
+    vx_dot = VehiclePlant(P).derivatives(state, np.zeros(3))[VX]
+    assert reference.vx == pytest.approx(7.0 + 0.2 * vx_dot, abs=1e-9)
 
 
 def test_saturates_beyond_the_peak_and_at_the_steering_limit() -> None:

@@ -145,3 +145,27 @@ def test_torque_slews_at_the_motors_rate_limit() -> None:
     slow = VehicleParams(torque_rate_max=500.0)
     log = run(Reference(delta=0.0, vx=7.0), 0.3, vehicle=slow)
     assert log[-1, 3] == pytest.approx(500.0 * 0.3, abs=1e-6)  # still ramping: 150 N m after 0.3 s
+
+
+def test_the_feed_forward_ramp_asks_for_at_most_its_share_of_the_torque() -> None:
+    """accel_margin = 0.5: the reference ramps at r · 0.5 T_max / J_n, so the nominal plant needs half the torque;
+    the car follows the ramp with the torque near 0.5 T_max, well below the motors' limit."""
+    params = MotionParams(accel_margin=0.5)
+    log = run(Reference(delta=0.0, vx=9.0), 3.0, params=params)
+    j_n = P.J_wr + P.r**2 * P.m / 2 * (1 - params.slip_nominal)
+    slope = P.r * 0.5 * P.T_max / j_n  # 0.73 m/s²
+    t = log[:, 0]
+    ramping = (t > 0.5) & (t < 2.5)
+    assert np.max(np.abs(log[ramping, 3])) < 0.6 * P.T_max
+    assert np.mean(log[ramping, 3]) == pytest.approx(0.5 * P.T_max, rel=0.1)
+    acceleration = np.polyfit(t[ramping], log[ramping, 1], 1)[0]
+    assert acceleration == pytest.approx(slope, rel=0.1)
+
+
+def test_the_step_must_keep_the_discrete_eps_loop_monotone() -> None:
+    ctrl = MotionController(MotionParams(k_delta=20.0), P)
+    estimate = StateEstimate(0.0, 0.0, 0.0, 0.0, 5.0, 0.0, 0.0, 0.0)
+    ctrl.step(Reference(0.1, 5.0), estimate, 0.0, 0.05)  # K_δ dt = 1 exactly: allowed (deadbeat)
+    for dt in (0.0, -0.01, 0.0500001):
+        with pytest.raises(ValueError, match=rf"^dt = {dt!r} is invalid: expected 0 < dt <= 1/k_delta = 0.05$"):
+            ctrl.step(Reference(0.1, 5.0), estimate, 0.0, dt)

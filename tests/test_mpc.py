@@ -129,17 +129,27 @@ def test_exact_hold_prediction() -> None:
     assert pred[1, 1] != pred[0, 1] + 0.2 * 0.5  # unlike Euler, the first input moves y(k+1)
 
 
+def fly(x: float, y: float, vx: float, vy: float, ax: float, ay: float, t_s: float, n: int = 400) -> tuple:
+    """The kinematic model eq. (skin) integrated over one planning step by the trapezoidal rule (exact velocity),
+    not by the closed-form zero-order hold the planner uses."""
+    dt = t_s / n
+    for _ in range(n):
+        vx_next, vy_next = vx + dt * ax, vy + dt * ay
+        x, y = x + 0.5 * dt * (vx + vx_next), y + 0.5 * dt * (vy + vy_next)
+        vx, vy = vx_next, vy_next
+    return x, y, vx, vy
+
+
 def reference_cost(params: MpcParams, s0: np.ndarray, u: np.ndarray, th: Threat, v_des: float) -> float:
-    """𝒥 of eq. (jcaldef) written out from the paper's formulas (NumPy, for one threat)."""
+    """𝒥 of eq. (jcaldef) written out from the paper's formulas (NumPy, for one threat), on states predicted
+    by an independent integration of eq. (skin)."""
     p, g = params, GRID
     eps = 1.0 / math.sqrt(8.8 * g.mu * G)
     e1, e2, e3, e4 = p.eta
     total = 0.0
     x, y, vx, vy = s0
     for ux, uy in u:
-        ax, ay = ux * g.a_x_max, uy * g.a_y_max
-        x, y = x + g.t_s * vx + 0.5 * g.t_s**2 * ax, y + g.t_s * vy + 0.5 * g.t_s**2 * ay
-        vx, vy = vx + g.t_s * ax, vy + g.t_s * ay
+        x, y, vx, vy = fly(x, y, vx, vy, ux * g.a_x_max, uy * g.a_y_max, g.t_s)
         yt = th.side * (y - th.y_path)
         ys = th.w / (1 + math.exp((th.obstacle.x_min - x - 4 * vx) / (eps * math.sqrt(th.w * (vx**2 + p.v_reg**2)))))
         d, m, c = yt - ys, p.barrier_margin, p.barrier_clearance
@@ -171,7 +181,7 @@ def test_cost_is_eq_jcaldef_over_the_predicted_states(u: list[float], side: int,
     uu = np.array(u).reshape(10, 2)
     s0 = np.array([1.0, y, v, 0.4])
     inp = PlannerInput(0.0, state(v, 1.0, y, 0.4), th, 6.0, None)
-    assert planner.cost(inp, uu) == pytest.approx(reference_cost(params, s0, uu, th, 6.0), rel=1e-9, abs=1e-9)
+    assert planner.cost(inp, uu) == pytest.approx(reference_cost(params, s0, uu, th, 6.0), rel=1e-8, abs=1e-8)
 
 
 # --- Example emp:eta ---------------------------------------------------------------------------

@@ -62,8 +62,8 @@ def test_steering_usage_of_the_first_steps() -> None:
     accel[1, 1] = 6.0
     late = PlanResult(accel, "converged", 5, 1e-3, 1.0, zoh_rollout(np.array([0.0, 0.0, 5.0, 0.0]), accel, 0.2))
     est5 = StateEstimate(0.0, 0.0, 0.0, 0.0, 5.0, 0.0, 0.0, 0.0)
-    # kinematic steering L a / v^2 = 1.7 * 6 / 25 = 0.408 rad: 1.36 delta_max
-    assert f.steering_usage(late, est5) == pytest.approx(1.7 * 6.0 / 25.0 / 0.3)
+    # 6 m/s² at 5 m/s needs 0.408 rad of kinematic steering (curvature a / v² = tan δ / L): beyond δ_max
+    assert f.steering_usage(late, est5) > 1.3
     assert wf(n_rho=1).steering_usage(late, est5) == 0.0
     assert f.weight(late, threat(), est5) < 0.01 < wf(n_rho=1).weight(late, threat(), est5)
     # row 0 is the FBL's delta* (the paper's delta_MPC): 6 m/s^2 from straight running needs more front
@@ -116,3 +116,123 @@ def test_next_initial_guess_shifts_by_one_step() -> None:
 def test_bad_parameters_name_the_field(field: str, value: float) -> None:
     with pytest.raises(ParamError, match=field):
         WeightParams(**{field: value})
+
+
+def test_steering_usage_is_the_steering_the_car_needs_for_the_planned_acceleration() -> None:
+    """Independent reference: the plant itself.  Hold a small steering angle at 5 m/s, measure the steady lateral
+    acceleration it gives, and scale (linear range): a plan asking for a_y in its second step must report the
+    angle the car needs for it, |δ| / δ_max."""
+    from moose.vehicle import VY, VehiclePlant, initial_state
+
+    plant = VehiclePlant(VEHICLE)
+    state = initial_state(VEHICLE, vx=5.0)
+    state[-1] = 0.01  # δ
+    plant.reset(state)
+    plant.step(np.zeros(3), 4000)
+    a_per_rad = plant.specific_force[1] / 0.01  # steady a_y per radian of steering at 5 m/s
+    for a_y in (0.5, -0.8, 1.0):
+        accel = np.zeros((10, 2))
+        accel[1, 1] = a_y
+        ahead = PlanResult(accel, "converged", 5, 1e-3, 1.0,
+                           zoh_rollout(np.array([0.0, 0.0, 5.0, 0.0]), np.zeros((10, 2)), 0.2))
+        est5 = StateEstimate(0.0, 0.0, 0.0, 0.0, 5.0, 0.0, 0.0, 0.0)
+        assert wf(n_rho=3).steering_usage(ahead, est5) == pytest.approx(abs(a_y) / a_per_rad / VEHICLE.delta_max,
+                                                                        rel=0.02)
+        assert abs(plant.state[VY]) < 0.1  # the steady state it was measured in
+
+
+def logistic(z: float) -> float:
+    return 1.0 / (1.0 + math.exp(-z))
+
+
+def test_each_factor_is_the_logistic_function_of_its_scaled_distance() -> None:
+    """Away from the half-points: T(τ₀ + s_τ) = 1 / (1 + e⁻¹), N(ν₀ + s_ν) = 1 / (1 + e), L likewise."""
+    p = WeightParams()
+    f = wf()
+    base = f.weight(plan(0.0), threat(tau=50.0, nu=0.0), EST)  # straight on, τ far, ν = 0: the product of the tails
+    expected = (logistic(p.rho_0 / p.rho_slope) * logistic((50.0 - p.tau_0) / p.tau_slope)
+                * logistic(p.nu_0 / p.nu_slope))
+    assert base == pytest.approx(expected, rel=1e-9)
+    tau = f.weight(plan(0.0), threat(tau=p.tau_0 + p.tau_slope, nu=0.0), EST)
+    assert tau / base == pytest.approx(logistic(1.0) / logistic((50.0 - p.tau_0) / p.tau_slope), rel=1e-9)
+    nu = f.weight(plan(0.0), threat(tau=50.0, nu=p.nu_0 + 2 * p.nu_slope), EST)
+    assert nu / base == pytest.approx(logistic(-2.0) / logistic(p.nu_0 / p.nu_slope), rel=1e-9)
+
+
+def test_an_unknown_tau_or_nu_gives_the_mpc_no_weight() -> None:
+    f = wf()
+    assert f.weight(plan(0.5), threat(tau=math.nan), EST) == 0.0
+    assert f.weight(plan(0.5), threat(nu=math.nan), EST) == 0.0
+    assert f.weight(plan(0.5), threat(), EST) > 0.9
+
+
+def test_no_mpc_plan_counts_as_a_failure_and_the_weight_restarts_from_zero() -> None:
+    f = wf(smoothing=0.5)
+    msf = plan(3.0, "ok")
+    raw = f.weight(plan(0.5), threat(), EST)
+    assert f.blend(plan(0.5), msf, threat(), EST).weight_mpc == pytest.approx(raw)
+    missing = f.blend(None, msf, threat(), EST)
+    assert missing.weight_mpc == 0.0 and np.array_equal(missing.accel, msf.accel)
+    assert f.blend(plan(0.5), msf, threat(), EST).weight_mpc == pytest.approx(0.5 * raw)  # from 0, filtered
+
+
+def test_the_msf_fallback_is_a_float_copy() -> None:
+    f = wf()
+    msf = PlanResult(np.tile([1, 2], (10, 1)), "ok", 0, 0.0, 0.0, np.zeros((11, 4)))  # an integer plan
+    blend = f.blend(None, msf, threat(), EST)
+    assert blend.accel.dtype == np.float64 and np.array_equal(blend.accel, msf.accel)
+    floats = plan(3.0, "ok")
+    copy = f.blend(None, floats, threat(), EST).accel
+    copy[0, 0] = 99.0
+    assert floats.accel[0, 0] == 0.0  # the blend does not alias the MSF plan
+
+
+def rotated_plan(heading: float, speed: float, along: float, normal: float, n: int = 10) -> PlanResult:
+    """A plan flying at ``heading`` with the accelerations ``along`` and ``normal`` to the velocity from row 1 on."""
+    c, s = math.cos(heading), math.sin(heading)
+    accel = np.zeros((n, 2))
+    accel[1:] = [c * along - s * normal, s * along + c * normal]
+    predicted = np.zeros((n + 1, 4))
+    predicted[:, 2:] = [speed * c, speed * s]  # the velocity the plan predicts (held, for the check)
+    return PlanResult(accel, "converged", 5, 1e-3, 1.0, predicted)
+
+
+@pytest.mark.parametrize("heading", [0.0, math.pi / 4, 2.0, -math.pi / 2])
+def test_steering_usage_takes_the_acceleration_normal_to_the_predicted_velocity(heading: float) -> None:
+    """Curvature a_⊥ / v² = tan δ / L in the car's own frame: the same at any heading; the component along the
+    velocity (braking, driving) needs no steering."""
+    f = wf(n_rho=3)
+    est = StateEstimate(0.0, 0.0, 0.0, heading, 5.0, 0.0, 0.0, 0.0)
+    steering = f.steering_usage(rotated_plan(heading, 5.0, along=4.0, normal=1.5), est)
+    assert steering == pytest.approx(VEHICLE.wheelbase * 1.5 / 25.0 / VEHICLE.delta_max, rel=1e-9)
+    assert f.steering_usage(rotated_plan(heading, 5.0, along=-6.0, normal=0.0), est) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_steering_usage_at_a_crawl_and_at_rest() -> None:
+    f = wf(n_rho=3)
+    est = StateEstimate(0.0, 0.0, 0.0, math.pi / 2, 0.5, 0.0, 0.0, 0.0)
+    # heading +y at 0.5 m/s: a global −x acceleration is a left turn; speeds below v_low count as v_low
+    crawl = f.steering_usage(rotated_plan(math.pi / 2, 0.5, along=0.0, normal=2.0), est)
+    assert crawl == pytest.approx(VEHICLE.wheelbase * 2.0 / VEHICLE.v_low**2 / VEHICLE.delta_max, rel=1e-9)
+    rest = rotated_plan(0.0, 0.0, along=0.0, normal=0.0)
+    rest.accel[1:] = [3.0, 0.5]  # no velocity to be normal to: the lateral (global y) acceleration counts
+    usage = f.steering_usage(rest, StateEstimate(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+    assert usage >= VEHICLE.wheelbase * 0.5 / VEHICLE.v_low**2 / VEHICLE.delta_max - 1e-12
+
+
+def test_steering_usage_looks_at_most_at_the_plan_it_has() -> None:
+    f = wf(n_rho=50)  # beyond the horizon: every row, no more
+    p = rotated_plan(0.0, 5.0, along=0.0, normal=1.0)
+    assert f.steering_usage(p, StateEstimate(0.0, 0.0, 0.0, 0.0, 5.0, 0.0, 0.0, 0.0)) == pytest.approx(
+        VEHICLE.wheelbase * 1.0 / 25.0 / VEHICLE.delta_max)
+
+
+def test_the_first_step_counts_with_the_fbl_steering_not_the_kinematic_one() -> None:
+    """Row 0 is the δ* the FBL computes (the paper's δ_MPC): at straight running the front tyre alone gives the
+    lateral force, m a_y / C_f — less than the kinematic L a_y / v² of later rows at this speed."""
+    fbl = FeedbackLinearization(FblParams(), VEHICLE, 0.2)
+    first_only = plan(1.0)
+    first_only.accel[1:] = 0.0
+    expected = abs(fbl.reference(first_only.accel[0], EST).delta) / VEHICLE.delta_max
+    assert wf(n_rho=3).steering_usage(first_only, EST) == pytest.approx(expected, rel=1e-12)
+    assert expected < VEHICLE.wheelbase * 1.0 / 7.0**2 / VEHICLE.delta_max  # the kinematic value would be larger

@@ -41,7 +41,6 @@ def summarize(result: SimulationResult) -> dict[str, Any]:
                     scenario.field, result.end_time, config.verdict)
     notes: dict[str, str] = {}
     first = result.first_threat
-    t_detect = first.t if first is not None else None
     solves = [r.mpc for r in result.planning if r.mpc is not None]
     solve_ms = np.array([s.solve_time_s * 1e3 for s in solves])
     threatened = [r.blend.weight_mpc for r in result.planning
@@ -103,8 +102,10 @@ def summarize(result: SimulationResult) -> dict[str, Any]:
                        if first.nu > 0 else "not a number")
     if first is not None and not np.isfinite(first.tau):
         notes["tau_s"] = "the car was not closing in on the obstacle (v_x ≤ 0)"
-    if t_detect is None:
-        notes.setdefault("mean_weight_mpc", "no planning step had a threat")
+    if not threatened:
+        any_threat = any(r.threat is not None for r in result.planning)
+        notes["mean_weight_mpc"] = ("no planning step had a threat" if not any_threat
+                                    else "no planning step with a threat recorded a weight")
     summary = _json_safe(summary, notes)
     summary["notes"] = notes
     return summary

@@ -8,9 +8,10 @@ eq. (skin); every quantity is in SI units.
 from __future__ import annotations
 
 import dataclasses
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .params import ParamError
 
@@ -77,15 +78,18 @@ class Obstacle:
             raise ParamError(f"y_min = {self.y_min!r} is invalid: expected below y_max = {self.y_max!r}")
 
     def contains(self, x: float, y: float) -> bool:
+        """Whether the point (x, y) lies in the closed box."""
         return self.x_min <= x <= self.x_max and self.y_min <= y <= self.y_max
 
-    def clearance(self, x: float, y: float) -> float:
-        """Signed distance of point (x, y) to the box: negative inside (m)."""
-        dx = max(self.x_min - x, x - self.x_max)
-        dy = max(self.y_min - y, y - self.y_max)
-        if dx <= 0.0 and dy <= 0.0:
-            return max(dx, dy)
-        return float(np.hypot(max(dx, 0.0), max(dy, 0.0)))
+    def clearance(self, x: ArrayLike, y: ArrayLike) -> Any:
+        """Signed distance of the point(s) (x, y) to the box (m): outside, the Euclidean distance to the box;
+        inside, minus the distance to the nearest edge; zero on an edge.  A float (``numpy.float64``) for a
+        point, an array for arrays; computed in double precision whatever the inputs' type."""
+        x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+        dx = np.maximum(self.x_min - x, x - self.x_max)
+        dy = np.maximum(self.y_min - y, y - self.y_max)
+        # the box's signed distance function: the distance outside plus the (negative) depth inside
+        return np.hypot(np.maximum(dx, 0.0), np.maximum(dy, 0.0)) + np.minimum(np.maximum(dx, dy), 0.0)
 
 
 @dataclasses.dataclass(frozen=True)

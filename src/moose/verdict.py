@@ -77,14 +77,6 @@ def segment_hits_box(x0: float, y0: float, x1: float, y1: float, box: Obstacle) 
     return True
 
 
-def clearance(x: np.ndarray, y: np.ndarray, box: Obstacle) -> np.ndarray:
-    """Signed distance of each point to ``box`` (m): positive outside, negative inside (to the nearest edge)."""
-    dx = np.maximum(box.x_min - x, x - box.x_max)
-    dy = np.maximum(box.y_min - y, y - box.y_max)
-    outside = np.hypot(np.maximum(dx, 0.0), np.maximum(dy, 0.0))
-    return np.where((dx <= 0.0) & (dy <= 0.0), np.maximum(dx, dy), outside)
-
-
 def _coverage(t: np.ndarray, end_time: float, max_gap: float) -> Optional[str]:
     """Why the samples do not cover [0, end_time], or None."""
     if t.size == 0:
@@ -105,7 +97,9 @@ def judge(t: np.ndarray, x: np.ndarray, y: np.ndarray, theta: np.ndarray, vx: np
     """The verdict of one run from the sampled true state (arrays of equal length, ``t`` increasing).
 
     ``vx``, ``vy`` are body-frame velocities (``base_link``), ``theta`` the yaw in ``odom``.
-    Non-finite samples count as missing (they never make a run look better).
+    Non-finite (or None) samples count as missing (they never make a run look better).  Samples are
+    taken in time order; samples with equal times keep the order given.  A sample on the zone's edge
+    touches it: the zone is closed.
     """
     arrays = [np.asarray(a, dtype=float) for a in (t, x, y, theta, vx, vy)]
     if len({a.shape for a in arrays}) != 1 or arrays[0].ndim != 1:
@@ -117,8 +111,8 @@ def judge(t: np.ndarray, x: np.ndarray, y: np.ndarray, theta: np.ndarray, vx: np
     missing = _coverage(t, end_time, params.max_gap)
     if t.size == 0:
         return Verdict("incomplete", False, False, False, False, False, None, None, None, missing or "")
-    gap = clearance(x, y, zone)
-    hit = bool(np.any(gap < 0.0)) or any(
+    gap = zone.clearance(x, y)
+    hit = bool(np.any(gap <= 0.0)) or any(
         segment_hits_box(float(x[i]), float(y[i]), float(x[i + 1]), float(y[i + 1]), zone) for i in range(len(x) - 1))
     min_clearance = float(np.min(gap))
     if hit:

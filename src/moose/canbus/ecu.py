@@ -28,7 +28,7 @@ class VehicleEcu:
     """Commands in, plant input out; sensor samples in, frames out."""
 
     def __init__(self, timeout: float = ECU_TIMEOUT, codec: Optional[Codec] = None) -> None:
-        if not (isinstance(timeout, (int, float)) and 0.0 < timeout < math.inf):
+        if isinstance(timeout, bool) or not (isinstance(timeout, (int, float)) and 0.0 < timeout < math.inf):
             raise ValueError(f"timeout = {timeout!r} is invalid: expected a positive number of seconds")
         self.codec = codec or Codec(node="VEHICLE")
         self.timeout = float(timeout)
@@ -72,9 +72,9 @@ class VehicleEcu:
             if isinstance(sample, EpsSample):
                 return [c.encode("EPS_STATUS", {"SteerAngle": sample.delta}, t, saturate=True)]
             if isinstance(sample, GpsSample):
-                values = (sample.x, sample.y, sample.vX, sample.vY, sample.t - sample.t_measured)
-                if not all(math.isfinite(v) for v in values):
-                    raise ValueError(f"GPS sample {sample!r} has a non-finite value")
+                if not all(math.isfinite(v) for v in (sample.x, sample.y, sample.vX, sample.vY, sample.t_measured)):
+                    self.unsendable += 1  # checked before the position frame, so no half of a fix goes out
+                    return []
                 return [c.encode("GPS_POSITION", {"PosX": sample.x, "PosY": sample.y}, t, saturate=True),
                         c.encode("GPS_VELOCITY", {"VelX": sample.vX, "VelY": sample.vY,
                                                   "FixAge": sample.t - sample.t_measured}, t, saturate=True)]

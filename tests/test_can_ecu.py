@@ -1,0 +1,124 @@
+"""The vehicle-side ECU emulator: its command timeouts to the millisecond, which signal drives which actuator, and
+which sensor value leaves in which signal — frames built and read back with cantools and the DBC, not the codec."""
+from __future__ import annotations
+
+import math
+
+import can
+import pytest
+
+from moose.canbus.codec import Codec, command_checksum, load_database
+from moose.canbus.ecu import ECU_TIMEOUT, VehicleEcu
+from moose.signals import EpsSample, GpsSample, ImuSample, WheelSpeedSample
+
+DB = load_database()
+
+
+def command(name: str, counter: int, **signals: float) -> can.Message:
+    """A command frame built from the DBC by cantools, with its CRC (E2E profile 1, identifier included)."""
+    message = DB.get_message_by_name(name)
+    values = {s.name: 0.0 for s in message.signals}
+    values.update(signals, Counter=counter, Checksum=0)
+    data = bytearray(message.encode(values))
+    data[7] = command_checksum(message.frame_id, bytes(data))
+    return can.Message(arbitration_id=message.frame_id, data=bytes(data), is_extended_id=False)
+
+
+def read(frame: can.Message) -> tuple[str, dict]:
+    return DB.get_message_by_frame_id(frame.arbitration_id).name, DB.decode_message(frame.arbitration_id, frame.data)
+
+
+def test_commands_drive_their_own_actuators_until_each_times_out() -> None:
+    ecu = VehicleEcu(timeout=0.05)
+    assert not ecu.steering_alive(0.0) and not ecu.torque_alive(0.0)
+    assert list(ecu.plant_input(0.0)) == [0.0, 0.0, 0.0]  # nothing received: EPS still, no torque
+    ecu.on_frame(command("CMD_STEER", 0, SteerAngleCmd=0.1, SteerRateCmd=0.4), 1.0)
+    ecu.on_frame(command("CMD_TORQUE", 0, TorqueRL=30.0, TorqueRR=-12.5), 1.02)
+    assert list(ecu.plant_input(1.02)) == pytest.approx([0.4, 30.0, -12.5])
+    assert ecu.steering_alive(1.05) and list(ecu.plant_input(1.05)) == pytest.approx([0.4, 30.0, -12.5])  # exactly
+    assert not ecu.steering_alive(1.051) and ecu.torque_alive(1.051)  # each command has its own age
+    assert list(ecu.plant_input(1.051)) == pytest.approx([0.0, 30.0, -12.5])
+    assert ecu.torque_alive(1.07) and not ecu.torque_alive(1.0701)
+    assert list(ecu.plant_input(1.071)) == [0.0, 0.0, 0.0]
+    ecu.on_frame(command("CMD_TORQUE", 1, TorqueRL=5.0, TorqueRR=6.0), 1.1)  # a fresh command revives it
+    assert list(ecu.plant_input(1.1)) == pytest.approx([0.0, 5.0, 6.0])
+
+
+def test_the_timeouts_allow_a_nanosecond_of_round_off() -> None:
+    ecu = VehicleEcu(timeout=0.05)
+    ecu.on_frame(command("CMD_STEER", 0, SteerAngleCmd=0.0, SteerRateCmd=0.2), 0.0)
+    ecu.on_frame(command("CMD_TORQUE", 0, TorqueRL=1.0, TorqueRR=1.0), 0.0)
+    assert ecu.steering_alive(0.05 + 1e-9) and ecu.torque_alive(0.05 + 1e-9)
+    assert not ecu.steering_alive(0.05 + 2e-9) and not ecu.torque_alive(0.05 + 2e-9)
+
+
+def test_a_frame_the_ecu_refuses_does_not_refresh_the_command() -> None:
+    ecu = VehicleEcu()
+    ecu.on_frame(command("CMD_TORQUE", 0, TorqueRL=40.0, TorqueRR=40.0), 0.0)
+    bad = command("CMD_TORQUE", 1, TorqueRL=90.0, TorqueRR=90.0)
+    data = bytearray(bad.data)
+    data[7] ^= 0x01  # a corrupted checksum
+    ecu.on_frame(can.Message(arbitration_id=bad.arbitration_id, data=bytes(data), is_extended_id=False), 0.04)
+    assert list(ecu.plant_input(0.04)) == pytest.approx([0.0, 40.0, 40.0])
+    assert list(ecu.plant_input(0.06)) == [0.0, 0.0, 0.0]  # aged from 0.0, not from the refused frame
+    assert ecu.codec.stats.bad_checksum == 1
+
+
+def test_the_default_timeout_is_five_command_cycles() -> None:
+    assert ECU_TIMEOUT == 0.05 and VehicleEcu().timeout == 0.05
+    assert DB.get_message_by_name("CMD_TORQUE").cycle_time * 5 == 1000 * ECU_TIMEOUT
+
+
+@pytest.mark.parametrize("timeout", [0.0, -0.01, math.inf, math.nan, True, "0.05"])
+def test_a_bad_timeout_is_refused(timeout: object) -> None:
+    with pytest.raises(ValueError, match=r"^timeout = .* is invalid: expected a positive number of seconds$"):
+        VehicleEcu(timeout=timeout)  # type: ignore[arg-type]
+
+
+def test_each_sensor_value_leaves_in_its_own_signal() -> None:
+    ecu = VehicleEcu()
+    frames = ecu.frames([ImuSample(1.0, 0.5, -1.25, 0.031), WheelSpeedSample(1.0, 20.5, 21.25),
+                         EpsSample(1.0, -0.0425), GpsSample(1.0, 0.8, 12.5, -3.25, 6.5, 0.75)], 1.0)
+    decoded = dict(read(f) for f in frames)
+    assert list(decoded) == ["IMU", "WHEEL_SPEEDS", "EPS_STATUS", "GPS_POSITION", "GPS_VELOCITY"]
+    imu = decoded["IMU"]
+    assert (imu["AccelX"], imu["AccelY"], imu["YawRate"]) == pytest.approx((0.5, -1.25, 0.031), abs=1e-3)
+    wheels = decoded["WHEEL_SPEEDS"]
+    assert (wheels["OmegaRL"], wheels["OmegaRR"]) == pytest.approx((20.5, 21.25), abs=0.01)
+    assert decoded["EPS_STATUS"]["SteerAngle"] == pytest.approx(-0.0425, abs=1e-4)
+    assert (decoded["GPS_POSITION"]["PosX"], decoded["GPS_POSITION"]["PosY"]) == pytest.approx((12.5, -3.25), abs=0.01)
+    velocity = decoded["GPS_VELOCITY"]
+    assert (velocity["VelX"], velocity["VelY"]) == pytest.approx((6.5, 0.75), abs=0.01)
+    assert velocity["FixAge"] == pytest.approx(0.2, abs=1e-3)  # delivered at 1.0 s, measured at 0.8 s
+    assert decoded["GPS_POSITION"]["Counter"] == velocity["Counter"]  # one fix: one counter
+    assert all(f.timestamp == 1.0 for f in frames)
+
+
+def test_sensor_values_beyond_the_dbc_range_saturate_and_non_finite_ones_are_not_sent() -> None:
+    ecu = VehicleEcu()
+    imu = DB.get_message_by_name("IMU").get_signal_by_name("YawRate")
+    (name, values), = [read(f) for f in ecu.encode(ImuSample(0.0, 0.0, 0.0, 1e6), 0.0)]
+    assert values["YawRate"] == pytest.approx(imu.maximum, abs=abs(imu.scale))
+    (name, values), = [read(f) for f in ecu.encode(WheelSpeedSample(0.0, -1e4, 1e4), 0.0)]
+    assert (values["OmegaRL"], values["OmegaRR"]) == pytest.approx((-300.0, 300.0))
+    (name, values), = [read(f) for f in ecu.encode(EpsSample(0.0, 2.0), 0.0)]
+    assert values["SteerAngle"] == pytest.approx(0.5)
+    position, velocity = [read(f)[1] for f in ecu.encode(GpsSample(1.0, -100.0, 1e9, -1e9, 99.0, -99.0), 1.0)]
+    assert (position["PosX"], position["PosY"]) == pytest.approx((134217.727, -134217.728))
+    assert (velocity["VelX"], velocity["VelY"], velocity["FixAge"]) == pytest.approx((30.0, -30.0, 60.0))
+    unsendable = [ImuSample(0.0, math.nan, 0.0, 0.0), WheelSpeedSample(0.0, math.nan, 1.0), EpsSample(0.0, math.inf),
+                  GpsSample(1.0, 0.8, math.inf, 0.0, 0.0, 0.0), GpsSample(1.0, math.nan, 1.0, 0.0, 0.0, 0.0)]
+    for k, sample in enumerate(unsendable, start=1):
+        assert ecu.encode(sample, 1.0) == [] and ecu.unsendable == k
+    with pytest.raises(TypeError, match="has no frame"):
+        ecu.encode(object(), 0.0)
+
+
+def test_the_ecu_receives_with_the_vehicle_node_and_ignores_its_own_frames() -> None:
+    ecu = VehicleEcu()
+    assert ecu.codec.node == "VEHICLE"
+    own = Codec().encode("IMU", {"YawRate": 0.1, "AccelX": 0.0, "AccelY": 0.0})
+    ecu.on_frame(own, 0.0)
+    assert ecu.codec.stats.own_id == 1 and list(ecu.plant_input(0.0)) == [0.0, 0.0, 0.0]
+    shared = Codec(node="VEHICLE")
+    assert VehicleEcu(codec=shared).codec is shared

@@ -1,0 +1,128 @@
+"""Test runs do not share resources and leave nothing running: checked from outside, with real processes.
+
+* Two test runs at once claim different DDS domains and UDP ports (tests/isolation.py), also when a domain's
+  discovery port is taken by a process that holds no lock (a graph left running by something else).
+* A process a test starts — in its own process group, so a signal to the run's group misses it — ends with the
+  test run even when pytest is SIGKILLed (tests/conftest.py's reaper).
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from isolation import DOMAIN_IDS
+
+TESTS = Path(__file__).resolve().parent
+
+CLAIM = textwrap.dedent("""
+    import json, sys, time
+    sys.path.insert(0, sys.argv[1])
+    from isolation import claim_domain, claim_udp_port
+    print(json.dumps({"domain": claim_domain(), "ports": [claim_udp_port() for _ in range(3)]}), flush=True)
+    sys.stdin.read()  # hold the claims until told to go
+""")
+
+
+def claims(n: int, env: dict | None = None) -> tuple[list[dict], list[subprocess.Popen]]:
+    procs = [subprocess.Popen([sys.executable, "-c", CLAIM, str(TESTS)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                              text=True, env=env) for _ in range(n)]
+    out = [json.loads(p.stdout.readline()) for p in procs]  # type: ignore[union-attr]
+    return out, procs
+
+
+def release(procs: list[subprocess.Popen]) -> None:
+    for p in procs:
+        p.stdin.close()  # type: ignore[union-attr]
+        p.wait(timeout=10)
+
+
+def test_concurrent_runs_claim_different_domains_and_ports() -> None:
+    held, procs = claims(4)
+    try:
+        domains = [h["domain"] for h in held]
+        ports = [port for h in held for port in h["ports"]]
+        assert len(set(domains)) == 4 and all(d in DOMAIN_IDS for d in domains)
+        assert int(os.environ["ROS_DOMAIN_ID"]) not in domains  # and none is this run's own
+        assert len(set(ports)) == len(ports)
+    finally:
+        release(procs)
+    again, procs = claims(1)  # released with the processes: free for the next run
+    release(procs)
+    assert again[0]["domain"] in DOMAIN_IDS
+
+
+def test_a_domain_whose_discovery_port_is_in_use_is_skipped() -> None:
+    # a process holding the next free domain's discovery port (7400 + 250 id) without a lock: a leftover graph
+    probe, procs = claims(1)
+    release(procs)
+    domain = probe[0]["domain"]
+    squatter = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        squatter.bind(("127.0.0.1", 7400 + 250 * domain))
+    except OSError:
+        squatter.close()
+        pytest.skip(reason=f"the discovery port of domain {domain} was taken meanwhile")
+    try:
+        held, procs = claims(1)
+        release(procs)
+        assert held[0]["domain"] != domain
+    finally:
+        squatter.close()
+
+
+INNER = textwrap.dedent('''
+    import os, subprocess, sys, time
+    from pathlib import Path
+
+    def test_starts_a_node_and_hangs():
+        node = subprocess.Popen([sys.executable, "-m", "moose_ros.nodes", "observer"], start_new_session=True,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        Path(os.environ["PID_FILE"]).write_text(str(node.pid))
+        time.sleep(600)
+''')
+
+
+def alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split(") ")[-1][0] != "Z"  # a zombie has ended
+    except OSError:
+        return False
+
+
+@pytest.mark.graph
+def test_a_node_started_by_a_test_ends_when_pytest_is_killed(tmp_path: Path) -> None:
+    (tmp_path / "test_inner.py").write_text(INNER)
+    pid_file = tmp_path / "node.pid"
+    python_path = os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")])
+    env = dict(os.environ, PID_FILE=str(pid_file), PYTHONPATH=python_path)
+    inner = subprocess.Popen([sys.executable, "-m", "pytest", "-q", "-p", "conftest", "-p", "no:randomly", "-p",
+                              "no:cacheprovider", "--rootdir", str(tmp_path), str(tmp_path / "test_inner.py")],
+                             cwd=tmp_path, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 60.0
+        while not pid_file.exists() or not pid_file.read_text():
+            assert time.monotonic() < deadline and inner.poll() is None, "the inner test run did not start its node"
+            time.sleep(0.1)
+        node = int(pid_file.read_text())
+        time.sleep(1.0)
+        assert alive(node) and os.getpgid(node) != os.getpgid(inner.pid)  # its own process group
+        inner.send_signal(signal.SIGKILL)
+        inner.wait(timeout=10)
+        deadline = time.monotonic() + 15.0
+        while alive(node) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not alive(node), f"node {node} outlived the killed test run"
+    finally:
+        if inner.poll() is None:
+            inner.kill()
+            inner.wait()

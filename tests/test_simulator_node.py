@@ -1,0 +1,75 @@
+"""The ``vehicle_simulator`` node on its actuator topic: a command older than ``command_timeout`` stops driving.
+
+The real node class on a real Cyclone DDS participant (this run's domain); its simulated time is advanced
+step by step by the test (its wall-clock timer is set 10 s apart, so it never fires), and the command comes
+from another participant over DDS.  The reference is the plant driven with the input the timeout allows.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from moose.vehicle import OMEGA_RL, VX, VehiclePlant
+from moose_ros.graph import ACTUATOR_COMMAND
+from moose_ros.nodes.simulator import VehicleSimulator
+from moose_ros.runtime import DdsNode
+
+pytestmark = [pytest.mark.graph]
+
+TORQUE = 200.0
+
+
+def wait_until(condition, seconds: float, spin) -> bool:
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        spin()
+    return condition()
+
+
+def test_a_command_older_than_the_timeout_stops_driving_the_plant() -> None:
+    rt = DdsNode("vehicle_simulator", overrides={"scenario": "paper_v7_tau1.4", "wait_for": [], "rate": 1e-3,
+                                                  "use_sim_time": False})
+    commander = DdsNode("test_commander", overrides={"use_sim_time": False})
+    try:
+        sim = VehicleSimulator(rt)
+        timeout, dt = sim.params.command_timeout, sim.dt
+        publish = ACTUATOR_COMMAND.publisher(commander)
+        assert wait_until(lambda: commander.count_subscribers(ACTUATOR_COMMAND.name) >= 1
+                          and rt.count_publishers(ACTUATOR_COMMAND.name) >= 1, 20.0, lambda: rt.spin_once(0.05))
+        for _ in range(20):  # 0.2 s of coasting: no command yet
+            sim.step()
+        before = sim.plant.state
+        msg = commander.make(ACTUATOR_COMMAND.type, steering_angle=0.0, steering_rate=0.0, torque_rl=TORQUE,
+                             torque_rr=TORQUE)
+        publish(msg)
+        end = time.monotonic() + 1.0  # delivery on loopback takes milliseconds; the node's timer never fires
+        while time.monotonic() < end:
+            rt.spin_once(0.02)
+        states = []
+        for _ in range(100):  # 1 s of simulated time after the single command
+            sim.step()
+            states.append(sim.plant.state)
+        states = np.array(states)
+    finally:
+        commander.shutdown()
+        rt.shutdown()
+    # the reference: the plant under the command for as long as the timeout allows (the steps at t1 … t1 + timeout),
+    # then without drive torque
+    steps = int(np.floor(timeout / dt + 1e-9)) + 1
+    reference = VehiclePlant(sim.plant.params, dt=sim.plant.dt)
+    reference.reset(before)
+    driven = [reference.step(np.array([0.0, TORQUE, TORQUE]), sim.steps) for _ in range(steps)]
+    coasted = [reference.step(np.zeros(3), sim.steps) for _ in range(100 - steps)]
+    expected = np.array(driven + coasted)
+    # the command arrived and acted: the car sped up (the whole command, or a rate-limited part of it)
+    assert np.max(states[:, VX]) > before[VX] + 0.01 and np.max(states[:, OMEGA_RL]) > before[OMEGA_RL] + 0.1
+    # and it stopped acting after the timeout: never more drive than the command held for the timeout gives
+    # (the simulator may limit the torque's rate, or brake once the command is stale)
+    assert np.all(states[steps:, VX] <= expected[steps:, VX] + 1e-6)
+    held = VehiclePlant(sim.plant.params, dt=sim.plant.dt)  # what ignoring the timeout would have done
+    held.reset(before)
+    assert held.step(np.array([0.0, TORQUE, TORQUE]), 100 * sim.steps)[VX] > expected[-1, VX] + 1.0
