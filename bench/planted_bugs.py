@@ -70,7 +70,8 @@ BUGS = (
           "return crc8_j1850(bytes(payload[:CHECKSUM_BYTE]))"),),
         ("tests/test_can.py", "tests/test_can_dbc.py")),
     Bug("ecu-torque-timeout-ignored", "ECU ignores its torque timeout", "src/moose/canbus/ecu.py",
-        (("fresh = self.torque_alive(t)", "fresh = True"),),
+        (("steering, torque = self.steering_alive(t), self.torque_alive(t)",
+          "steering, torque = self.steering_alive(t), True"),),
         ("tests/test_can.py", "tests/test_can_plant.py")),
 )
 

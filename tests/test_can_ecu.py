@@ -5,11 +5,16 @@ from __future__ import annotations
 import math
 
 import can
+import numpy as np
 import pytest
 
 from moose.canbus.codec import Codec, command_checksum, load_database
 from moose.canbus.ecu import ECU_TIMEOUT, VehicleEcu
+from moose.minimum_risk import ActuatorLimits, MinimumRiskManeuver
+from moose.params import VehicleParams
+from moose.schema import MinimumRiskParams
 from moose.signals import EpsSample, GpsSample, ImuSample, WheelSpeedSample
+from moose.vehicle import DELTA, GAMMA, OMEGA_RL, OMEGA_RR, THETA, VX, VY, VehiclePlant, X, initial_state
 
 DB = load_database()
 
@@ -122,3 +127,82 @@ def test_the_ecu_receives_with_the_vehicle_node_and_ignores_its_own_frames() -> 
     assert ecu.codec.stats.own_id == 1 and list(ecu.plant_input(0.0)) == [0.0, 0.0, 0.0]
     shared = Codec(node="VEHICLE")
     assert VehicleEcu(codec=shared).codec is shared
+
+
+# -- level 2 of the timeout: the ECUs' own minimum-risk maneuver
+
+
+def ecu_with_maneuver() -> tuple[VehicleEcu, MinimumRiskManeuver]:
+    maneuver = MinimumRiskManeuver(MinimumRiskParams(), ActuatorLimits.from_vehicle(VehicleParams()), 0.01)
+    return VehicleEcu(maneuver=maneuver), maneuver
+
+
+def test_an_ecu_never_commanded_does_not_run_the_maneuver() -> None:
+    ecu, _ = ecu_with_maneuver()
+    ecu.encode(EpsSample(0.0, 0.2), 0.0)
+    ecu.encode(WheelSpeedSample(0.0, 20.0, 20.0), 0.0)
+    assert list(ecu.plant_input(0.0)) == [0.0, 0.0, 0.0] and not ecu.minimum_risk  # parked, not braking
+
+
+def test_a_lost_stream_starts_the_maneuver_from_the_ecus_own_measurements() -> None:
+    ecu, maneuver = ecu_with_maneuver()
+    limits, p = maneuver.limits, maneuver.params
+    ecu.on_frame(command("CMD_STEER", 0, SteerAngleCmd=0.2, SteerRateCmd=0.3), 0.0)
+    ecu.on_frame(command("CMD_TORQUE", 0, TorqueRL=50.0, TorqueRR=50.0), 0.0)
+    assert list(ecu.plant_input(0.0)) == pytest.approx([0.3, 50.0, 50.0]) and not ecu.minimum_risk
+    # the torque stream stays fresh, the steering stream goes stale: level 2 for both actuators
+    ecu.on_frame(command("CMD_TORQUE", 1, TorqueRL=50.0, TorqueRR=50.0), 0.05)
+    ecu.encode(EpsSample(0.06, 0.2), 0.06)
+    ecu.encode(WheelSpeedSample(0.06, 20.0, 22.0), 0.06)
+    rate, t_rl, t_rr = ecu.plant_input(0.06)
+    assert ecu.minimum_risk
+    # steer back: −K_δ·δ_meas = −4 rad/s, within the vehicle's rate limit
+    assert rate == pytest.approx(-min(p.eps_gain * 0.2, limits.steer_rate_limit))
+    # brake: the torque falls from the last command at the torque-rate limit, the same on both wheels
+    assert t_rl == t_rr == pytest.approx(50.0 - limits.torque_rate_limit * 0.01)
+    for k in range(200):
+        ecu.encode(WheelSpeedSample(0.07 + 0.01 * k, 20.0, 22.0), 0.07 + 0.01 * k)
+        ecu.encode(EpsSample(0.07 + 0.01 * k, 0.0), 0.07 + 0.01 * k)
+        rate, t_rl, t_rr = ecu.plant_input(0.07 + 0.01 * k)
+    brake = min(p.brake_gain * 21.0, p.brake_fraction * limits.torque_max)
+    assert (rate, t_rl, t_rr) == pytest.approx((0.0, -brake, -brake))  # straight, full regenerative braking
+    # fresh commands on both streams end it
+    ecu.on_frame(command("CMD_STEER", 1, SteerAngleCmd=0.0, SteerRateCmd=0.1), 2.1)
+    ecu.on_frame(command("CMD_TORQUE", 2, TorqueRL=5.0, TorqueRR=6.0), 2.1)
+    assert list(ecu.plant_input(2.1)) == pytest.approx([0.1, 5.0, 6.0]) and not ecu.minimum_risk
+
+
+def test_without_measurements_the_maneuver_does_not_brake_blind() -> None:
+    ecu, maneuver = ecu_with_maneuver()
+    ecu.on_frame(command("CMD_STEER", 0, SteerAngleCmd=0.0, SteerRateCmd=0.0), 0.0)
+    ecu.on_frame(command("CMD_TORQUE", 0, TorqueRL=0.0, TorqueRR=0.0), 0.0)
+    ecu.encode(WheelSpeedSample(0.0, 20.0, 20.0), 0.0)  # older than the timeout at t = 1
+    assert list(ecu.plant_input(1.0)) == [0.0, 0.0, 0.0] and ecu.minimum_risk
+
+
+def drive_until_the_commands_stop(ecu: VehicleEcu) -> np.ndarray:
+    """6 m/s; 20 ms of commands (steer left at 2 rad/s, 20 N m), then nothing for 10 s."""
+    vehicle = VehicleParams()
+    plant = VehiclePlant(vehicle, dt=1e-3)
+    plant.reset(initial_state(vehicle, vx=6.0))
+    ecu.on_frame(command("CMD_STEER", 0, SteerAngleCmd=0.1, SteerRateCmd=2.0), 0.0)
+    ecu.on_frame(command("CMD_TORQUE", 0, TorqueRL=20.0, TorqueRR=20.0), 0.0)
+    ecu.on_frame(command("CMD_STEER", 1, SteerAngleCmd=0.1, SteerRateCmd=2.0), 0.02)
+    for k in range(1000):
+        t = 0.01 * k
+        s = plant.state
+        ecu.encode(EpsSample(t, s[DELTA]), t)
+        ecu.encode(WheelSpeedSample(t, s[OMEGA_RL], s[OMEGA_RR]), t)
+        plant.step(ecu.plant_input(t), 10)
+    return plant.state
+
+
+def test_a_car_whose_commands_stop_is_straightened_and_stopped_by_its_ecus() -> None:
+    s = drive_until_the_commands_stop(ecu_with_maneuver()[0])
+    assert math.hypot(s[VX], s[VY]) < 0.05 and abs(s[DELTA]) < 0.01 and abs(s[GAMMA]) < 0.01
+    assert abs(s[THETA]) < 0.3 and s[X] < 25.0  # it steered left for 70 ms, then back: a short, straight stop
+
+
+def test_without_level_two_the_car_coasts_on_an_arc() -> None:
+    s = drive_until_the_commands_stop(VehicleEcu())
+    assert math.hypot(s[VX], s[VY]) > 5.0 and s[DELTA] > 0.05 and s[THETA] > 1.5  # still turning left

@@ -6,12 +6,16 @@ from another participant over DDS.  The reference is the plant driven with the i
 """
 from __future__ import annotations
 
+import os
 import time
 
 import numpy as np
 import pytest
 
-from moose.vehicle import OMEGA_RL, VX, VehiclePlant
+from moose.canbus.bridge import BridgeCore
+from moose.canbus.bus import open_bus
+from moose.canbus.safety import Command, GuardParams
+from moose.vehicle import DELTA, OMEGA_RL, VX, VY, VehiclePlant
 from moose_ros.graph import ACTUATOR_COMMAND
 from moose_ros.nodes.simulator import VehicleSimulator
 from moose_ros.runtime import DdsNode
@@ -73,3 +77,35 @@ def test_a_command_older_than_the_timeout_stops_driving_the_plant() -> None:
     held = VehiclePlant(sim.plant.params, dt=sim.plant.dt)  # what ignoring the timeout would have done
     held.reset(before)
     assert held.step(np.array([0.0, TORQUE, TORQUE]), 100 * sim.steps)[VX] > expected[-1, VX] + 1.0
+
+
+@pytest.mark.can
+@pytest.mark.parametrize("level_two", [True, False], ids=["ecu_minimum_risk", "no_ecu_minimum_risk"])
+def test_on_the_can_bus_the_emulated_ecus_stop_the_car_when_the_commands_stop(level_two: bool) -> None:
+    """The simulator as the vehicle-side ECU emulator (``vehicle_bus: can``) on a virtual bus: commands as frames
+    from the bridge's core for 0.5 s, then none (a dead bridge).  ``ecu_minimum_risk`` decides what the car does."""
+    channel = f"moose-test-ecu-{os.getpid()}-{level_two}"
+    rt = DdsNode("vehicle_simulator", overrides={"scenario": "paper_v7_tau1.4", "wait_for": [], "rate": 1e-3,
+                                                  "use_sim_time": False, "vehicle_bus": "can",
+                                                  "can_interface": "virtual", "can_channel": channel,
+                                                  "ecu_minimum_risk": level_two})
+    bridge_side = open_bus("virtual", channel)
+    try:
+        sim = VehicleSimulator(rt)
+        bridge = BridgeCore(GuardParams.from_vehicle(sim.config.vehicle))
+        for k in range(50):  # steer left gently, light drive torque
+            bridge.on_command(Command(0.05, 0.5, 20.0, 20.0), 0.01 * k)
+            for frame in bridge.tick(0.01 * k):
+                bridge_side.send(frame)
+            sim.step()
+        for _ in range(1000):  # 10 s without a bridge
+            sim.step()
+        state = sim.plant.state
+    finally:
+        bridge_side.shutdown()
+        rt.shutdown()
+    speed = float(np.hypot(state[VX], state[VY]))
+    if level_two:
+        assert speed < 0.1 and abs(state[DELTA]) < 0.01
+    else:
+        assert speed > 2.0 and abs(state[DELTA]) > 0.02, (speed, state[DELTA])  # coasting, the steering held

@@ -33,8 +33,9 @@ KINDS = {
     "input_stale": "an input of a node passed its deadline",
     "minimum_risk": "a minimum-risk maneuver ran (motion controller, the simulator's or the CAN bridge's guard)",
     "planner_fallback": "weight_fbl applied one planner's plan alone",
-    "ecu_timeout": "the vehicle-side ECUs received no commands (the CAN graph without a bridge): zero torque, the "
-                   "steering held — nothing of the stack controls the car",
+    "ecu_timeout": "the vehicle-side ECUs received no commands (the CAN graph without a bridge): they run their "
+                   "own minimum-risk maneuver (or, with ecu_minimum_risk false, zero torque and the steering held) "
+                   "— nothing of the stack controls the car",
     "deadline_missed": "executor cycles, planning slots or control cycles over their deadline (counted)",
     "input_dropped": "invalid samples dropped by a node",
     "rate_not_held": "the achieved real-time factor fell below the requested one",

@@ -104,6 +104,10 @@ class SimulatorParams(ScenarioParams, CanBusParams):
     """Start without the missing ``wait_for`` nodes after this long (s, wall clock)."""
     command_timeout: float = _checked(COMMAND_TIMEOUT, positive, "a positive time (s)")
     """Actuator commands older than this (s) are ignored (zero torque and EPS rate)."""
+    ecu_minimum_risk: bool = True
+    """``can`` bus: the emulated vehicle ECUs run the minimum-risk maneuver themselves when the commands stop
+    (level 2 of :class:`moose.canbus.ecu.VehicleEcu`'s timeout, a requirement on the car's ECUs); ``false``
+    emulates ECUs that only stop applying commands (the car coasts on an arc when the bridge dies)."""
 
 
 @dataclasses.dataclass(frozen=True)

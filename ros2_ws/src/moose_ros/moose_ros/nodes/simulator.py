@@ -8,7 +8,7 @@ from typing import Any, Optional
 import numpy as np
 
 from moose.canbus.safety import CommandGuard, GuardParams, GuardState
-from moose.minimum_risk import Command
+from moose.minimum_risk import ActuatorLimits, Command, MinimumRiskManeuver
 from moose.sensors import Sensors
 from moose.signals import ActuatorCommand, EpsSample, WheelSpeedSample
 from moose.vehicle import VehiclePlant, initial_state
@@ -68,8 +68,9 @@ class CanVehicleIo:
 
         self.node = node
         self.bus = node.params.open_bus(node.name)
-        self.ecu = VehicleEcu(timeout=node.params.command_timeout)
-        self.commanded = False
+        maneuver = (MinimumRiskManeuver(node.config.minimum_risk, ActuatorLimits.from_vehicle(node.config.vehicle),
+                                        node.dt) if node.params.ecu_minimum_risk else None)
+        self.ecu = VehicleEcu(timeout=node.params.command_timeout, maneuver=maneuver)
 
     def send(self, sample: Any, t: float) -> None:
         for frame in self.ecu.encode(sample, t):
@@ -81,14 +82,16 @@ class CanVehicleIo:
     def command(self, t: float) -> np.ndarray:
         while (frame := self.bus.recv(timeout=0.0)) is not None:
             self.ecu.on_frame(frame, t)
+        u = self.ecu.plant_input(t)
         alive = self.ecu.steering_alive(t) and self.ecu.torque_alive(t)
-        self.commanded = self.commanded or alive
-        if self.commanded and not alive:  # no bridge on the bus: the car is the ECUs' own, not the stack's
-            self.node.problem("ecu_timeout", WARN, "vehicle ECUs' command timeout: zero torque, EPS stopped "
-                                                   "(steering held); the stack no longer controls the car")
+        if self.ecu.commanded and not alive:  # no bridge on the bus: the car is the ECUs' own, not the stack's
+            what = ("the ECUs' own minimum-risk maneuver" if self.ecu.minimum_risk
+                    else "zero torque, EPS stopped (steering held)")
+            self.node.problem("ecu_timeout", WARN, f"vehicle ECUs' command timeout: {what}; the stack no longer "
+                                                   "controls the car")
         else:
             self.node.problem("ecu_timeout", None)
-        return self.ecu.plant_input(t)
+        return u
 
 
 class VehicleSimulator(GraphNode):
