@@ -60,6 +60,8 @@ MODULES: dict[str, list[str]] = {
     "canbus.codec": ["test_can_codec.py", "test_can.py", "test_can_dbc.py", "test_can_bridge.py",
                      "test_conventions.py"],
     "canbus.safety": ["test_can_guard.py", "test_can_safety.py", "test_can_bridge.py", "test_can.py"],
+    "minimum_risk": ["test_minimum_risk.py", "test_can_guard.py", "test_can_safety.py", "test_can_ecu.py",
+                     "test_can_plant.py"],
     "canbus.bridge": ["test_can_bridge_core.py", "test_can_bridge.py", "test_can.py", "test_can_dbc.py",
                       "test_conventions.py"],
     "canbus.ecu": ["test_can_ecu.py", "test_can.py", "test_can_plant.py", "test_can_bridge.py", "test_conventions.py"],

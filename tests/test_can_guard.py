@@ -115,7 +115,7 @@ def test_the_maneuver_stops_after_the_wheels_were_still_for_the_stop_time() -> N
         return -1
 
     assert outputs_until_stopped([0.0] * 30) == 20
-    assert outputs_until_stopped([P.stop_speed] * 30) == 20  # exactly the stop speed counts as still
+    assert outputs_until_stopped([P.maneuver.stop_speed] * 30) == 20  # exactly the stop speed counts as still
     assert outputs_until_stopped([0.0] * 10 + [0.5] + [0.0] * 30) == 31  # restarted after the eleventh
     assert outputs_until_stopped([0.0] * 10 + [None] * 7 + [0.0] * 30) == 37  # stale for 7: restarted
     guard = CommandGuard(P)  # a valid command in between also restarts it

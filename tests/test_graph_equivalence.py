@@ -36,12 +36,15 @@ latency is 0.4 m/s²; over the 2 s of the maneuver the extra loop delay (10–30
 the MSF's feedback sees (measured up to 0.41 m/s² in three runs on a loaded machine)."""
 ACCEL_RMS_TOLERANCE = 0.25
 """m/s², over the instants with the obstacle ahead (measured 0.1–0.2)."""
-RATE = 0.5
+RATE = 0.25
 """Simulated seconds per wall-clock second.  What is compared is what the graph computes, not how fast: at real
 time on two cores shared with other jobs (the suite, other graphs), each tick of scheduling delay is a tick of
 simulated latency, and once (load average above 5, with supervision in every node) the detection came late
 enough to meet the MSF's counter-steer phase where the MPC's solution changes branch: RMS 0.28 m/s².  At half
-speed the same load costs half the simulated latency (speed is the benchmarks' business: bench/bench_graph.py)."""
+speed the same load cost half the simulated latency; CI then measures every node under coverage.py's tracer,
+which slows each node's Python about twofold, and the same branch change gave RMS 0.26 m/s² at half speed.  A
+quarter of real time keeps a node's latency in simulated time where it was without the tracer (speed is the
+benchmarks' business: bench/bench_graph.py)."""
 
 
 @pytest.fixture(scope="module")
