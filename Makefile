@@ -34,7 +34,7 @@ test: $(STAMP)
 		|| { echo "coverage of src/moose below $(COVERAGE_FLOOR) %"; exit 1; }
 	@echo "line coverage of src/moose: $$(MOOSE_COVERAGE_DIR=$(CURDIR)/.coverage-data $(BIN)/python -m coverage report --include='src/moose/*' --format=total) % (floor $(COVERAGE_FLOOR) %)"
 
-# Mutation score of the safety- and verdict-critical modules (bench/mutation.py; hours on 2 cores; not in CI).
+# Mutation score of the safety- and verdict-critical modules (bench/mutation.py; about 12 min on 2 cores; not in CI).
 # One module: make mutation MODULES=canbus.codec.  The table in docs/design.md: bench/mutation.py --table --docs
 mutation: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[mutation]'

@@ -1,6 +1,6 @@
 """Mutation score of the safety- and verdict-critical modules (mutmut), per module.
 
-    python bench/mutation.py                    # every module of MODULES (long: hours on 2 cores)
+    python bench/mutation.py                    # every module of MODULES (about 12 min on 2 cores)
     python bench/mutation.py canbus.codec fbl   # some of them
     python bench/mutation.py --table            # only print the table from the stored results
     python bench/mutation.py --docs             # ... and write it into docs/design.md

@@ -139,9 +139,67 @@ def ecu_with_maneuver() -> tuple[VehicleEcu, MinimumRiskManeuver]:
 
 def test_an_ecu_never_commanded_does_not_run_the_maneuver() -> None:
     ecu, _ = ecu_with_maneuver()
+    assert ecu.commanded is False and ecu.minimum_risk is False
     ecu.encode(EpsSample(0.0, 0.2), 0.0)
     ecu.encode(WheelSpeedSample(0.0, 20.0, 20.0), 0.0)
-    assert list(ecu.plant_input(0.0)) == [0.0, 0.0, 0.0] and not ecu.minimum_risk  # parked, not braking
+    assert list(ecu.plant_input(0.0)) == [0.0, 0.0, 0.0] and ecu.minimum_risk is False  # parked, not braking
+
+
+def lost_after_one_command(torque: float = 50.0) -> tuple[VehicleEcu, MinimumRiskManeuver]:
+    """An ECU commanded once at t = 0 (steering rate 0.3 rad/s, ``torque`` on both motors), stale from 0.05 s."""
+    ecu, maneuver = ecu_with_maneuver()
+    ecu.on_frame(command("CMD_STEER", 0, SteerAngleCmd=0.2, SteerRateCmd=0.3), 0.0)
+    ecu.on_frame(command("CMD_TORQUE", 0, TorqueRL=torque, TorqueRR=torque), 0.0)
+    assert ecu.commanded is True
+    return ecu, maneuver
+
+
+def test_the_maneuver_starts_from_what_the_actuators_applied() -> None:
+    """Commanded but never applied (no plant input before the loss): the motors were at 0 N m, so the braking
+    torque ramps from 0 at the torque-rate limit, not from the command that never acted."""
+    ecu, maneuver = lost_after_one_command()
+    ecu.encode(WheelSpeedSample(0.1, 20.0, 20.0), 0.1)
+    _, t_rl, t_rr = ecu.plant_input(0.1)
+    assert t_rl == t_rr == pytest.approx(-maneuver.limits.torque_rate_limit * 0.01)
+
+
+def test_the_ecu_brakes_in_proportion_to_the_mean_wheel_speed() -> None:
+    """Below T_brake the braking torque is k_ω times the mean of the two rear wheel speeds."""
+    ecu, maneuver = lost_after_one_command(torque=0.0)
+    for k in range(30):  # long enough for the torque-rate limit to settle
+        t = 0.06 + 0.01 * k
+        ecu.encode(WheelSpeedSample(t, 0.4, 0.6), t)
+        _, t_rl, t_rr = ecu.plant_input(t)
+    assert t_rl == t_rr == pytest.approx(-maneuver.params.brake_gain * 0.5)
+
+
+def test_wheel_speeds_that_arrive_late_are_braked_on() -> None:
+    """No wheel speed for longer than the stop time: the ECU does not brake blind, and does not take the silence for
+    a standstill — braking starts once speeds arrive."""
+    ecu, maneuver = lost_after_one_command(torque=0.0)
+    for k in range(40):
+        assert list(ecu.plant_input(0.06 + 0.01 * k))[1:] == [0.0, 0.0]
+    ecu.encode(WheelSpeedSample(0.46, 20.0, 20.0), 0.46)
+    assert ecu.plant_input(0.46)[1] == pytest.approx(-maneuver.limits.torque_rate_limit * 0.01)
+
+
+def test_without_the_eps_angle_the_ecu_ramps_its_reference_from_the_angle_it_last_measured() -> None:
+    """The EPS angle goes silent with the commands: the steering reference ramps from the last measured 0.2 rad to 0
+    at δ̇_max (rate −δ̇_max), instead of holding the angle (rate 0)."""
+    ecu, maneuver = lost_after_one_command()
+    ecu.encode(EpsSample(0.02, 0.2), 0.02)
+    rates = [ecu.plant_input(0.06 + 0.01 * k)[0] for k in range(6)]  # the angle is fresh until 0.07 s, then stale
+    assert ecu.minimum_risk is True
+    assert rates == pytest.approx([-maneuver.limits.steer_rate_limit] * 6)
+
+
+def test_the_ecus_own_measurements_count_up_to_the_timeout() -> None:
+    ecu, maneuver = lost_after_one_command(torque=0.0)
+    ecu.encode(WheelSpeedSample(0.06, 20.0, 20.0), 0.06)
+    assert ecu.plant_input(0.11)[1] < 0.0  # exactly 50 ms old: still fresh, braking
+    ecu, maneuver = lost_after_one_command(torque=0.0)
+    ecu.encode(WheelSpeedSample(0.06, 20.0, 20.0), 0.06)
+    assert ecu.plant_input(0.1101)[1] == 0.0  # older: not braking blind
 
 
 def test_a_lost_stream_starts_the_maneuver_from_the_ecus_own_measurements() -> None:
@@ -152,12 +210,13 @@ def test_a_lost_stream_starts_the_maneuver_from_the_ecus_own_measurements() -> N
     assert list(ecu.plant_input(0.0)) == pytest.approx([0.3, 50.0, 50.0]) and not ecu.minimum_risk
     # the torque stream stays fresh, the steering stream goes stale: level 2 for both actuators
     ecu.on_frame(command("CMD_TORQUE", 1, TorqueRL=50.0, TorqueRR=50.0), 0.05)
-    ecu.encode(EpsSample(0.06, 0.2), 0.06)
+    ecu.encode(EpsSample(0.06, 0.03), 0.06)
     ecu.encode(WheelSpeedSample(0.06, 20.0, 22.0), 0.06)
     rate, t_rl, t_rr = ecu.plant_input(0.06)
-    assert ecu.minimum_risk
-    # steer back: −K_δ·δ_meas = −4 rad/s, within the vehicle's rate limit
-    assert rate == pytest.approx(-min(p.eps_gain * 0.2, limits.steer_rate_limit))
+    assert ecu.minimum_risk is True
+    # steer back from the measured angle: −K_δ·δ_meas = −0.6 rad/s, inside the rate limit (a reference ramp
+    # would ask for −δ̇_max)
+    assert p.eps_gain * 0.03 < limits.steer_rate_limit and rate == pytest.approx(-p.eps_gain * 0.03)
     # brake: the torque falls from the last command at the torque-rate limit, the same on both wheels
     assert t_rl == t_rr == pytest.approx(50.0 - limits.torque_rate_limit * 0.01)
     for k in range(200):
@@ -169,7 +228,7 @@ def test_a_lost_stream_starts_the_maneuver_from_the_ecus_own_measurements() -> N
     # fresh commands on both streams end it
     ecu.on_frame(command("CMD_STEER", 1, SteerAngleCmd=0.0, SteerRateCmd=0.1), 2.1)
     ecu.on_frame(command("CMD_TORQUE", 2, TorqueRL=5.0, TorqueRR=6.0), 2.1)
-    assert list(ecu.plant_input(2.1)) == pytest.approx([0.1, 5.0, 6.0]) and not ecu.minimum_risk
+    assert list(ecu.plant_input(2.1)) == pytest.approx([0.1, 5.0, 6.0]) and ecu.minimum_risk is False
 
 
 def test_without_measurements_the_maneuver_does_not_brake_blind() -> None:

@@ -35,6 +35,11 @@ def test_every_limit_must_be_positive_and_the_timeout_within_the_ecus(field: str
         GuardParams(timeout=0.06)
 
 
+def test_the_maneuver_parameters_must_be_a_parameter_group() -> None:
+    with pytest.raises(ParamError, match=r"^maneuver = 'brake' is invalid: expected a MinimumRiskParams$"):
+        GuardParams(maneuver="brake")  # type: ignore[arg-type]
+
+
 def test_a_fresh_guard_reports_nothing() -> None:
     guard = CommandGuard(P)
     assert guard.state == GuardState.IDLE and guard.timed_out

@@ -33,6 +33,19 @@ def test_the_law_never_holds_the_steering_angle_and_brakes_with_the_wheel_speed(
     assert law.target(out, 0.004, 1.0).steering_rate == 0.0  # straight within the tolerance: the EPS rests
 
 
+def test_a_new_maneuver_counts_the_standstill_from_its_first_output() -> None:
+    """A car already standing when the maneuver starts: the stop time (0.2 s) is 20 outputs, not 19."""
+    maneuver = MinimumRiskManeuver(MinimumRiskParams(), LIMITS, DT)
+    assert maneuver.stopped is False
+    old = Command(0.0, 0.0, 0.0, 0.0)
+    for k in range(1, 21):
+        assert not maneuver.stopped, k
+        old = maneuver.step(old, 0.0, 0.0)
+    assert maneuver.stopped is True
+    maneuver.reset()
+    assert maneuver.stopped is False
+
+
 def test_the_guard_runs_the_same_law() -> None:
     """The guard's maneuver is moose.minimum_risk's, step for step (not a copy of it)."""
     import moose.canbus.safety as safety

@@ -56,6 +56,7 @@ class VehicleEcu:
         self._angle = (-math.inf, 0.0)
         self._wheel_speed = (-math.inf, 0.0)
         self._out = Command(0.0, 0.0, 0.0, 0.0)
+        """The last plant input as a command (the maneuver starts from its torques)."""
         self.unsendable = 0
         """Sensor samples with a non-finite value (not sent)."""
 
@@ -89,9 +90,9 @@ class VehicleEcu:
                 self._out = dataclasses.replace(self._out, steering_angle=0.0 if angle is None else angle)
             self._out = self.maneuver.step(self._out, angle, self._measured(self._wheel_speed, t))
         else:
-            self.minimum_risk = False
-            self._out = Command(0.0 if angle is None else angle, self._steer[1] if steering else 0.0,
-                                self._torque[1] if torque else 0.0, self._torque[2] if torque else 0.0)
+            self.minimum_risk = False  # the angle reference is taken from the EPS when the maneuver starts
+            self._out = Command(0.0, self._steer[1] if steering else 0.0, self._torque[1] if torque else 0.0,
+                                self._torque[2] if torque else 0.0)
         return np.array([self._out.steering_rate, self._out.torque_rl, self._out.torque_rr])
 
     def _measured(self, sample: tuple[float, float], t: float) -> Optional[float]:
