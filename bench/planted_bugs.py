@@ -53,7 +53,10 @@ BUGS = (
         (("dy = np.maximum(self.y_min - y, y - self.y_max)", "dy = np.maximum(self.y_max - y, y - self.y_min)"),),
         ("tests/test_signals.py", "tests/test_verdict.py", "tests/test_metrics.py")),
     Bug("simulator-timeout-ignored", "simulator ignores its actuator-command timeout", f"{NODES}/simulator.py",
-        (("if t - self.last_command <= self.timeout:", "if True:"),),
+        # the simulator's topic input applies the newest command it received, however old, instead of the guard's
+        # output (which times it out into the minimum-risk maneuver)
+        (("        out = self.guard.output(t)\n",
+          "        out = self.guard.output(t)\n        out = self.guard._latest or out\n"),),
         ("tests/test_simulator_node.py",)),
     Bug("barrier-sign", "barrier sign flipped in the MPC cost", "src/moose/mpc/cost.py",
         (("    d = y_tilde - ysafe\n", "    d = ysafe - y_tilde\n"),),
