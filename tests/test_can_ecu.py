@@ -43,6 +43,7 @@ def test_commands_drive_their_own_actuators_until_each_times_out() -> None:
     assert ecu.steering_alive(1.05) and list(ecu.plant_input(1.05)) == pytest.approx([0.4, 30.0, -12.5])  # exactly
     assert not ecu.steering_alive(1.051) and ecu.torque_alive(1.051)  # each command has its own age
     assert list(ecu.plant_input(1.051)) == pytest.approx([0.0, 30.0, -12.5])
+    assert ecu.commands_lost is True and ecu.minimum_risk is False  # level 1 only: no maneuver configured
     assert ecu.torque_alive(1.07) and not ecu.torque_alive(1.0701)
     assert list(ecu.plant_input(1.071)) == [0.0, 0.0, 0.0]
     ecu.on_frame(command("CMD_TORQUE", 1, TorqueRL=5.0, TorqueRR=6.0), 1.1)  # a fresh command revives it
@@ -143,6 +144,7 @@ def test_an_ecu_never_commanded_does_not_run_the_maneuver() -> None:
     ecu.encode(EpsSample(0.0, 0.2), 0.0)
     ecu.encode(WheelSpeedSample(0.0, 20.0, 20.0), 0.0)
     assert list(ecu.plant_input(0.0)) == [0.0, 0.0, 0.0] and ecu.minimum_risk is False  # parked, not braking
+    assert ecu.commands_lost is False  # never commanded: nothing was lost
 
 
 def lost_after_one_command(torque: float = 50.0) -> tuple[VehicleEcu, MinimumRiskManeuver]:
@@ -213,7 +215,7 @@ def test_a_lost_stream_starts_the_maneuver_from_the_ecus_own_measurements() -> N
     ecu.encode(EpsSample(0.06, 0.03), 0.06)
     ecu.encode(WheelSpeedSample(0.06, 20.0, 22.0), 0.06)
     rate, t_rl, t_rr = ecu.plant_input(0.06)
-    assert ecu.minimum_risk is True
+    assert ecu.minimum_risk is True and ecu.commands_lost is True
     # steer back from the measured angle: −K_δ·δ_meas = −0.6 rad/s, inside the rate limit (a reference ramp
     # would ask for −δ̇_max)
     assert p.eps_gain * 0.03 < limits.steer_rate_limit and rate == pytest.approx(-p.eps_gain * 0.03)
@@ -229,6 +231,7 @@ def test_a_lost_stream_starts_the_maneuver_from_the_ecus_own_measurements() -> N
     ecu.on_frame(command("CMD_STEER", 1, SteerAngleCmd=0.0, SteerRateCmd=0.1), 2.1)
     ecu.on_frame(command("CMD_TORQUE", 2, TorqueRL=5.0, TorqueRR=6.0), 2.1)
     assert list(ecu.plant_input(2.1)) == pytest.approx([0.1, 5.0, 6.0]) and ecu.minimum_risk is False
+    assert ecu.commands_lost is False
 
 
 def test_without_measurements_the_maneuver_does_not_brake_blind() -> None:

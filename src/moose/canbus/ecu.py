@@ -51,6 +51,9 @@ class VehicleEcu:
         self._torque = (-math.inf, 0.0, 0.0)
         self.commanded = False
         """A valid command frame has arrived (the stack had the car): level 2 is armed."""
+        self.commands_lost = False
+        """At the last plant input the ECU had been commanded and either command stream was stale: the stack
+        no longer controlled the car (level 1 or 2 applied)."""
         self.minimum_risk = False
         """The last plant input was the ECU's own minimum-risk maneuver."""
         self._angle = (-math.inf, 0.0)
@@ -83,7 +86,8 @@ class VehicleEcu:
         timeout; level 2, the minimum-risk maneuver once commanded and either command is stale."""
         steering, torque = self.steering_alive(t), self.torque_alive(t)
         angle = self._measured(self._angle, t)
-        if self.maneuver is not None and self.commanded and not (steering and torque):
+        self.commands_lost = self.commanded and not (steering and torque)
+        if self.maneuver is not None and self.commands_lost:
             if not self.minimum_risk:
                 self.maneuver.reset()
                 self.minimum_risk = True

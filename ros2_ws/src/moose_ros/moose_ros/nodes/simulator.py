@@ -83,8 +83,7 @@ class CanVehicleIo:
         while (frame := self.bus.recv(timeout=0.0)) is not None:
             self.ecu.on_frame(frame, t)
         u = self.ecu.plant_input(t)
-        alive = self.ecu.steering_alive(t) and self.ecu.torque_alive(t)
-        if self.ecu.commanded and not alive:  # no bridge on the bus: the car is the ECUs' own, not the stack's
+        if self.ecu.commands_lost:  # no bridge on the bus: the car is the ECUs' own, not the stack's
             what = ("the ECUs' own minimum-risk maneuver" if self.ecu.minimum_risk
                     else "zero torque, EPS stopped (steering held)")
             self.node.problem("ecu_timeout", WARN, f"vehicle ECUs' command timeout: {what}; the stack no longer "
