@@ -140,7 +140,7 @@ def ecu_with_maneuver() -> tuple[VehicleEcu, MinimumRiskManeuver]:
 
 def test_an_ecu_never_commanded_does_not_run_the_maneuver() -> None:
     ecu, _ = ecu_with_maneuver()
-    assert ecu.commanded is False and ecu.minimum_risk is False
+    assert ecu.commanded is False and ecu.minimum_risk is False and ecu.commands_lost is False
     ecu.encode(EpsSample(0.0, 0.2), 0.0)
     ecu.encode(WheelSpeedSample(0.0, 20.0, 20.0), 0.0)
     assert list(ecu.plant_input(0.0)) == [0.0, 0.0, 0.0] and ecu.minimum_risk is False  # parked, not braking
