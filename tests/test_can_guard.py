@@ -4,20 +4,12 @@ from __future__ import annotations
 
 import pytest
 
+from can_lockstep import commanding
 from moose.canbus.safety import Command, CommandGuard, GuardParams, GuardState
 from moose.params import ParamError
 
 P = GuardParams()
 DT = 0.01
-
-
-def commanding(guard: CommandGuard, command: Command, cycles: int, t0: float = 0.0) -> float:
-    t = t0
-    for _ in range(cycles):
-        guard.receive(command)
-        guard.output(t)
-        t = round(t + DT, 9)
-    return t
 
 
 @pytest.mark.parametrize("period", [0.0, -0.01, float("inf"), float("nan"), True])

@@ -8,22 +8,19 @@ straight, yaw stable, within the distance its braking torque allows.
 from __future__ import annotations
 
 import math
-import os
 from collections import Counter
 from typing import Callable
 
 import numpy as np
 import pytest
 
-from moose.canbus.bridge import BridgeCore
-from moose.canbus.bus import open_bus
+from can_lockstep import Feedback, drive_over_can
 from moose.canbus.codec import default_database
 from moose.canbus.ecu import VehicleEcu
 from moose.canbus.safety import Command, GuardParams, GuardState
 from moose.params import VehicleParams
 from moose.schema import SensorParams
-from moose.sensors import Sensors
-from moose.signals import EpsSample, GpsSample, ImuSample, WheelSpeedSample
+from moose.signals import GpsSample, ImuSample, WheelSpeedSample
 from moose.vehicle import (
     DELTA,
     GAMMA,
@@ -32,10 +29,8 @@ from moose.vehicle import (
     THETA,
     VX,
     VY,
-    VehiclePlant,
     X,
     Y,
-    initial_state,
 )
 
 pytestmark = [pytest.mark.can]
@@ -49,43 +44,15 @@ STOP = 1.2
 def run() -> dict:
     vehicle = VehicleParams()
     guard = GuardParams.from_vehicle(vehicle)
-    plant = VehiclePlant(vehicle, dt=1e-3)
-    plant.reset(initial_state(vehicle, vx=5.0))
-    sensors = Sensors(SensorParams(), vehicle, np.random.default_rng(3))
-    bridge, ecu = BridgeCore(guard), VehicleEcu(timeout=guard.timeout)
-    channel = f"moose-test-plant-{os.getpid()}"
-    bridge_side, car_side = open_bus("virtual", channel), open_bus("virtual", channel)
-    truth, inputs, records, car_rx, car_tx = {}, {}, [], Counter(), Counter()
-    delta_meas = 0.0
-    try:
-        for k in range(int(round(2.0 / DT)) + 1):
-            t = round(k * DT, 9)
-            state = plant.state
-            truth[t] = state
-            if t <= STOP:  # the motion controller: FB-EPS towards 0.1 rad, 100 N m per wheel
-                bridge.on_command(Command(0.1, 20.0 * (0.1 - delta_meas), 100.0, 100.0), t)
-            for frame in bridge.tick(t):
-                bridge_side.send(frame)
-            while (frame := car_side.recv(timeout=0.0)) is not None:
-                car_rx[frame.arbitration_id] += 1
-                ecu.on_frame(frame, t)
-            u = ecu.plant_input(t)
-            inputs[t] = u
-            for frame in ecu.frames(sensors.sample(t, state, plant.imu_specific_force(state, u)), t):
-                car_tx[frame.arbitration_id] += 1
-                car_side.send(frame)
-            while (frame := bridge_side.recv(timeout=0.0)) is not None:
-                record = bridge.on_frame(frame, t)
-                if record is not None:
-                    records.append(record)
-                    if isinstance(record, EpsSample):
-                        delta_meas = record.delta
-            plant.step(u, 10)
-    finally:
-        bridge_side.shutdown()
-        car_side.shutdown()
-    return {"truth": truth, "inputs": inputs, "records": records, "car_rx": car_rx, "car_tx": car_tx,
-            "bridge": bridge, "ecu": ecu, "guard": guard}
+
+    def controller(t: float, feedback: Feedback) -> Command | None:
+        """The motion controller until STOP: FB-EPS towards 0.1 rad, 100 N m per wheel."""
+        return Command(0.1, 20.0 * (0.1 - feedback.delta), 100.0, 100.0) if t <= STOP else None
+
+    run = drive_over_can(vehicle, guard, VehicleEcu(timeout=guard.timeout), 5.0, 2.0, controller, seed=3)
+    car_rx = Counter(frame.arbitration_id for frame in run.to_car)
+    return {"truth": run.truth, "inputs": run.inputs, "records": run.records, "car_rx": car_rx,
+            "car_tx": run.car_tx, "bridge": run.bridge, "ecu": run.ecu, "guard": guard}
 
 
 def test_frames_leave_at_the_dbc_cycle_times(run: dict) -> None:
@@ -130,42 +97,16 @@ def test_steering_follows_through_the_bus_within_the_rate_limit(run: dict) -> No
 def lockstep(vehicle: VehicleParams, guard: GuardParams, v0: float, loss: float, duration: float,
              steering: Callable[[float], float]) -> dict:
     """The car at v0 under a speed-holding, steering controller through the bridge; silence from ``loss`` on."""
-    plant = VehiclePlant(vehicle, dt=1e-3)
-    plant.reset(initial_state(vehicle, vx=v0))
-    sensors = Sensors(SensorParams(), vehicle, np.random.default_rng(7))
-    bridge, ecu = BridgeCore(guard), VehicleEcu()
-    channel = f"moose-test-mrm-{os.getpid()}"
-    bridge_side, car_side = open_bus("virtual", channel), open_bus("virtual", channel)
-    delta_meas, omega_meas = 0.0, v0 / vehicle.r
-    truth, inputs, states = {}, {}, {}
-    try:
-        for k in range(int(round(duration / DT)) + 1):
-            t = round(k * DT, 9)
-            state = plant.state
-            truth[t] = state
-            if t < loss:  # the motion controller: FB-EPS towards the steering profile, a P law holding v0
-                torque = float(np.clip(150.0 * (v0 / vehicle.r - omega_meas), -vehicle.T_max, vehicle.T_max))
-                bridge.on_command(Command(steering(t), 20.0 * (steering(t) - delta_meas), torque, torque), t)
-            for frame in bridge.tick(t):
-                bridge_side.send(frame)
-            states[t] = bridge.guard.state
-            while (frame := car_side.recv(timeout=0.0)) is not None:
-                ecu.on_frame(frame, t)
-            u = ecu.plant_input(t)
-            inputs[t] = u
-            for frame in ecu.frames(sensors.sample(t, state, plant.imu_specific_force(state, u)), t):
-                car_side.send(frame)
-            while (frame := bridge_side.recv(timeout=0.0)) is not None:
-                record = bridge.on_frame(frame, t)
-                if isinstance(record, EpsSample):
-                    delta_meas = record.delta
-                if isinstance(record, WheelSpeedSample):
-                    omega_meas = 0.5 * (record.omega_rl + record.omega_rr)
-            plant.step(u, 10)
-    finally:
-        bridge_side.shutdown()
-        car_side.shutdown()
-    return {"truth": truth, "inputs": inputs, "states": states}
+
+    def controller(t: float, feedback: Feedback) -> Command | None:
+        """The motion controller: FB-EPS towards the steering profile, a P law holding v0."""
+        if t >= loss:
+            return None
+        torque = float(np.clip(150.0 * (v0 / vehicle.r - feedback.omega), -vehicle.T_max, vehicle.T_max))
+        return Command(steering(t), 20.0 * (steering(t) - feedback.delta), torque, torque)
+
+    run = drive_over_can(vehicle, guard, VehicleEcu(), v0, duration, controller, seed=7)
+    return {"truth": run.truth, "inputs": run.inputs, "states": run.states}
 
 
 def lane_change(t: float) -> float:

@@ -9,6 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from can_hostile import clock_step, hostile_guard_params, wild
+from can_lockstep import commanding
 from moose.canbus.safety import Command, CommandGuard, GuardParams, GuardState
 from moose.params import VEHICLE_LIMITS, ParamError, VehicleParams
 from moose.schema import MinimumRiskParams
@@ -73,18 +74,9 @@ def test_the_steering_rate_is_one_fact_for_the_angle_reference_and_the_eps_rate_
 # -- clock steps -----------------------------------------------------------------------------------
 
 
-def commanding(guard: CommandGuard, command: Command, t0: float, cycles: int) -> float:
-    t = t0
-    for _ in range(cycles):
-        guard.receive(command)
-        guard.output(t)
-        t = round(t + DT, 9)
-    return t
-
-
 def test_a_forward_clock_step_does_not_widen_the_rate_limits() -> None:
     guard = CommandGuard(P)
-    t = commanding(guard, Command(0.0, 0.0, 0.0, 0.0), 100.0, 20)
+    t = commanding(guard, Command(0.0, 0.0, 0.0, 0.0), 20, 100.0)
     guard.receive(Command(0.3, 1.0, 200.0, 200.0))
     out = guard.output(t + 1.0)  # the clock steps +1 s between two frames
     assert guard.state == GuardState.COMMANDING  # the command arrived after the step: fresh
@@ -94,21 +86,21 @@ def test_a_forward_clock_step_does_not_widen_the_rate_limits() -> None:
 
 def test_a_forward_clock_step_ages_a_command_that_arrived_before_it() -> None:
     guard = CommandGuard(P)
-    t = commanding(guard, Command(0.1, 0.0, 100.0, 100.0), 0.0, 20)
+    t = commanding(guard, Command(0.1, 0.0, 100.0, 100.0), 20, 0.0)
     guard.output(t + 1.0)  # nothing new since the step: the newest command is 1 s old on this clock
     assert guard.state == GuardState.MINIMUM_RISK
 
 
 def test_a_backward_clock_step_neither_freezes_the_command_nor_disables_the_timeout() -> None:
     guard = CommandGuard(P)
-    t = commanding(guard, Command(0.2, 0.5, 150.0, 150.0), 10.0, 40)
+    t = commanding(guard, Command(0.2, 0.5, 150.0, 150.0), 40, 10.0)
     # new commands after a -5 s step are followed
-    t = commanding(guard, Command(0.0, 0.0, 0.0, 0.0), t - 5.0, 30)
+    t = commanding(guard, Command(0.0, 0.0, 0.0, 0.0), 30, t - 5.0)
     out = guard.output(t)
     assert out.steering_angle == pytest.approx(0.0, abs=1e-12) and out.torque_rl == pytest.approx(0.0, abs=1e-9)
     # the controller dies at a -5 s step: the timeout still fires within timeout + one cycle
     guard = CommandGuard(P)
-    t = commanding(guard, Command(0.2, 0.5, 150.0, 150.0), 10.0, 40) - 5.0
+    t = commanding(guard, Command(0.2, 0.5, 150.0, 150.0), 40, 10.0) - 5.0
     states = []
     for k in range(10):
         guard.output(round(t + k * DT, 9))
@@ -119,7 +111,7 @@ def test_a_backward_clock_step_neither_freezes_the_command_nor_disables_the_time
 
 def test_a_stopped_clock_does_not_disable_the_timeout() -> None:
     guard = CommandGuard(P)
-    commanding(guard, Command(0.2, 0.5, 150.0, 150.0), 1.0, 10)
+    commanding(guard, Command(0.2, 0.5, 150.0, 150.0), 10, 1.0)
     states = []
     for _ in range(8):
         guard.output(1.0)  # the same time over and over
@@ -252,7 +244,7 @@ def test_end_stops_use_a_fresh_measurement_only() -> None:
 
 def test_lost_commands_steer_back_to_straight_and_brake_to_a_stop() -> None:
     guard = CommandGuard(P)
-    t = commanding(guard, Command(0.3, 0.0, 100.0, 100.0), 0.0, 40)
+    t = commanding(guard, Command(0.3, 0.0, 100.0, 100.0), 40, 0.0)
     delta, omega, outs = 0.3, 23.0, []
     for k in range(400):
         guard.observe_angle(delta)
@@ -279,7 +271,7 @@ def test_lost_commands_steer_back_to_straight_and_brake_to_a_stop() -> None:
 
 def test_braking_falls_with_the_wheel_speed_and_needs_a_fresh_measurement() -> None:
     guard = CommandGuard(P)
-    t = commanding(guard, Command(0.0, 0.0, 0.0, 0.0), 0.0, 10)
+    t = commanding(guard, Command(0.0, 0.0, 0.0, 0.0), 10, 0.0)
     for k in range(30):
         guard.observe_wheel_speeds(0.5, 0.7)  # 0.6 rad/s: k_ω·ω̄ = 90 N m < T_brake
         out = guard.output(t + k * DT)
@@ -288,7 +280,7 @@ def test_braking_falls_with_the_wheel_speed_and_needs_a_fresh_measurement() -> N
         out = guard.output(t + k * DT)
     assert out.torque_rl == 0.0 and guard.state == GuardState.MINIMUM_RISK
     guard = CommandGuard(P)
-    t = commanding(guard, Command(0.0, 0.0, 0.0, 0.0), 0.0, 10)
+    t = commanding(guard, Command(0.0, 0.0, 0.0, 0.0), 10, 0.0)
     for k in range(30):
         guard.observe_wheel_speeds(-2.0, -2.0)  # rolling backwards: the braking torque is positive
         out = guard.output(t + k * DT)
@@ -297,7 +289,7 @@ def test_braking_falls_with_the_wheel_speed_and_needs_a_fresh_measurement() -> N
 
 def test_without_an_angle_measurement_the_eps_follows_the_reference_ramp() -> None:
     guard = CommandGuard(P)
-    t = commanding(guard, Command(0.05, 0.0, 0.0, 0.0), 0.0, 20)
+    t = commanding(guard, Command(0.05, 0.0, 0.0, 0.0), 20, 0.0)
     rates = []
     for k in range(12):
         out = guard.output(t + k * DT)

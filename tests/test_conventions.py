@@ -8,13 +8,10 @@ not the plant's own equations.  Neither check is symmetric: a left/right swap in
 """
 from __future__ import annotations
 
-import os
-
 import numpy as np
 import pytest
 
-from moose.canbus.bridge import BridgeCore
-from moose.canbus.bus import open_bus
+from can_lockstep import Feedback, drive_over_can
 from moose.canbus.codec import load_database
 from moose.canbus.ecu import VehicleEcu
 from moose.canbus.safety import Command, GuardParams
@@ -22,9 +19,8 @@ from moose.fbl import FeedbackLinearization
 from moose.motion import MotionController
 from moose.params import VehicleParams
 from moose.schema import FblParams, MotionParams, SensorParams
-from moose.sensors import Sensors
 from moose.signals import EpsSample, ImuSample, Reference, StateEstimate, WheelSpeedSample
-from moose.vehicle import DELTA, GAMMA, THETA, VX, VehiclePlant, Y, initial_state
+from moose.vehicle import DELTA, GAMMA, THETA, VX, Y
 
 pytestmark = [pytest.mark.can]
 
@@ -43,42 +39,18 @@ def drive(delta: float, t_rl: float, t_rr: float, v0: float, seconds: float, see
     (δ̇_cmd = K_δ (δ* − δ_meas)): bridge → virtual CAN → ECU emulator → plant → sensors → CAN → bridge."""
     guard = GuardParams.from_vehicle(P)
     k_delta = MotionParams().k_delta
-    plant = VehiclePlant(P)
-    plant.reset(initial_state(P, vx=v0))
-    sensors = Sensors(SensorParams(), P, np.random.default_rng(seed))
-    bridge, ecu = BridgeCore(guard), VehicleEcu(timeout=guard.timeout)
-    channel = f"moose-test-conventions-{os.getpid()}"
-    bridge_side, car_side = open_bus("virtual", channel), open_bus("virtual", channel)
-    wire, inputs, truth, received = [], [], [], []
-    delta_meas = 0.0
-    try:
-        for k in range(int(round(seconds / DT)) + 1):
-            t = round(k * DT, 9)
-            state = plant.state
-            truth.append(state)
-            bridge.on_command(Command(delta, k_delta * (delta - delta_meas), t_rl, t_rr), t)
-            for frame in bridge.tick(t):
-                bridge_side.send(frame)
-            while (frame := car_side.recv(timeout=0.0)) is not None:
-                message = DBC.get_message_by_frame_id(frame.arbitration_id)
-                if message.name in ("CMD_TORQUE", "CMD_STEER"):
-                    wire.append((message.name, DBC.decode_message(frame.arbitration_id, frame.data)))
-                ecu.on_frame(frame, t)
-            u = ecu.plant_input(t)
-            inputs.append(u)
-            for frame in ecu.frames(sensors.sample(t, state, plant.imu_specific_force(state, u)), t):
-                car_side.send(frame)
-            while (frame := bridge_side.recv(timeout=0.0)) is not None:
-                record = bridge.on_frame(frame, t)
-                if record is not None:
-                    received.append(record)
-                    if isinstance(record, EpsSample):
-                        delta_meas = record.delta
-            plant.step(u, 10)
-    finally:
-        bridge_side.shutdown()
-        car_side.shutdown()
-    return {"wire": wire, "inputs": np.array(inputs), "truth": np.array(truth), "received": received}
+
+    def controller(t: float, feedback: Feedback) -> Command:
+        return Command(delta, k_delta * (delta - feedback.delta), t_rl, t_rr)
+
+    run = drive_over_can(P, guard, VehicleEcu(timeout=guard.timeout), v0, seconds, controller, seed)
+    wire = []
+    for frame in run.to_car:
+        message = DBC.get_message_by_frame_id(frame.arbitration_id)
+        if message.name in ("CMD_TORQUE", "CMD_STEER"):
+            wire.append((message.name, DBC.decode_message(frame.arbitration_id, frame.data)))
+    return {"wire": wire, "inputs": np.array(list(run.inputs.values())),
+            "truth": np.array(list(run.truth.values())), "received": run.records}
 
 
 def late(records: list, kind: type, t_from: float) -> list:
