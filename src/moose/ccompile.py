@@ -16,7 +16,7 @@ import shutil
 import subprocess
 import tempfile
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import Any, Callable, Optional, Sequence
 
 import casadi as ca
 import numpy as np
@@ -29,10 +29,16 @@ def cache_dir() -> Path:
 
 
 class CompiledFunction:
-    """A dense CasADi function with vector inputs/outputs, evaluated in compiled C."""
+    """A dense CasADi function with vector inputs/outputs, evaluated in compiled C.
 
-    def __init__(self, library: ctypes.CDLL, fn: ca.Function) -> None:
+    ``fixed`` sets the trailing inputs once (parameters that do not change between calls); a call
+    then passes only the leading ones.  Each instance owns its buffers: :meth:`bind` makes an
+    instance for one user of a shared library.
+    """
+
+    def __init__(self, library: ctypes.CDLL, fn: ca.Function, fixed: Sequence[np.ndarray | float] = ()) -> None:
         name = fn.name()
+        self._library, self._fn = library, fn
         self._call = getattr(library, name)
         work = getattr(library, name + "_work")
         sizes = [ctypes.c_longlong() for _ in range(4)]
@@ -45,18 +51,46 @@ class CompiledFunction:
         self._iw = (ctypes.c_longlong * n_iw)()
         self._w = np.zeros(n_w)
         self._wp = self._w.ctypes.data_as(_P)
+        n_free = fn.n_in() - len(fixed)
+        if n_free < 0:
+            raise ValueError(f"fixed = {len(fixed)} inputs is invalid: {name} has {fn.n_in()}")
+        # (buffer, has more than one column: a 2-D array is read in column-major order) per input
+        inputs = [(buffer, fn.size2_in(i) > 1) for i, buffer in enumerate(self._inputs)]
+        self._free = inputs[:n_free]
+        for (buffer, matrix), value in zip(inputs[n_free:], fixed):
+            _write(buffer, matrix, value)
+
+    def bind(self, *fixed: np.ndarray | float) -> "CompiledFunction":
+        """A new instance, with buffers of its own, whose last ``len(fixed)`` inputs are ``fixed``."""
+        return CompiledFunction(self._library, self._fn, fixed)
 
     def __call__(self, *args: np.ndarray | float) -> list[np.ndarray]:
-        for buffer, value in zip(self._inputs, args):
-            if isinstance(value, (float, int)):
+        if len(args) != len(self._free):
+            raise TypeError(f"{self._fn.name()} takes {len(self._free)} inputs, got {len(args)}")
+        # the closed loop's hot path (about 3,000 calls per simulated 10 s): kept free of helper calls
+        for (buffer, matrix), value in zip(self._free, args):
+            if type(value) is float:
                 buffer[0] = value
-            elif value.ndim > 1:
+            elif matrix and type(value) is np.ndarray and value.ndim > 1:
                 buffer[:] = value.ravel(order="F")
             else:
                 buffer[:] = value
         if self._call(self._arg, self._res, self._iw, self._wp, 0) != 0:
             raise RuntimeError("compiled CasADi function failed")
         return [r.copy() for r in self._outputs]
+
+
+def _write(buffer: np.ndarray, matrix: bool, value: np.ndarray | float) -> None:
+    """Copy one input into its buffer (column-major for a matrix)."""
+    array = np.asarray(value, dtype=float)
+    buffer[:] = array.ravel(order="F") if matrix else array.ravel()
+
+
+def bind(fn: Callable[..., Any], *fixed: np.ndarray | float) -> Callable[..., Any]:
+    """``fn`` with its trailing inputs set to ``fixed``: compiled, or CasADi's function as a closure."""
+    if isinstance(fn, CompiledFunction):
+        return fn.bind(*fixed)
+    return lambda *args: fn(*args, *fixed)
 
 
 def compile_library(name: str, functions: Sequence[ca.Function], source: str = "") -> Optional[ctypes.CDLL]:

@@ -40,7 +40,7 @@ from typing import Any, Union
 import casadi as ca
 import numpy as np
 
-from .ccompile import compile_function
+from .ccompile import bind, compile_function
 from .params import VehicleParams
 from .schema import ObserverParams
 from .signals import EpsSample, GpsSample, ImuSample, StateEstimate, WheelSpeedSample
@@ -70,11 +70,15 @@ class StateObserver:
         if params.estimate_mu:
             self._mu = min(max(self._mu, params.mu_min), params.mu_max)
         self._n = 7 if params.estimate_mu else 6
-        self._fn = _ekf(params.estimate_mu)
-        self._pv = vehicle_vector(vehicle)
+        pv = vehicle_vector(vehicle)
         q = [params.q_position, params.q_position, params.q_yaw, params.q_vx, params.q_vy, params.q_yaw_rate]
-        self._q = np.array(q + [params.q_mu] * (self._n - 6)) ** 2
-        self._r_imu = np.array([params.r_yaw_rate**2, params.r_lateral_accel**2])
+        q_squared = np.array(q + [params.q_mu] * (self._n - 6)) ** 2
+        r_imu = np.array([params.r_yaw_rate**2, params.r_lateral_accel**2])
+        # the EKF steps with this observer's constant inputs (vehicle, μ, noises) bound once
+        fns = _ekf(params.estimate_mu)
+        self._predict_fn = bind(fns["predict"], pv, self._mu, q_squared)
+        self._imu_fn = bind(fns["imu"], pv, self._mu, q_squared, r_imu)
+        self._wheel_fn = bind(fns["wheel"], params.r_wheel_speed**2)
         self._r_gps = np.array([params.r_gps_position**2] * 2 + [params.r_gps_velocity**2] * 2)
         self.reset(initial or StateEstimate(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
 
@@ -111,7 +115,7 @@ class StateObserver:
     def _predict(self, dt: float) -> None:
         if dt <= 0.0:
             return
-        self._x, P = self._fn["predict"](self._x, self._P, self._ax, self._delta, dt, self._pv, self._mu, self._q)
+        self._x, P = self._predict_fn(self._x, self._P, self._ax, self._delta, dt)
         self._P = P.reshape(self._n, self._n, order="F")
 
     def _bound_mu(self) -> None:
@@ -174,11 +178,10 @@ class StateObserver:
             self._t = t
 
     def _apply(self, sample: Sample) -> None:
-        p, prm = self.vehicle, self.params
+        p = self.vehicle
         if isinstance(sample, ImuSample):
             dt = max(sample.t - self._t, 0.0)
-            x, P = self._fn["imu"](self._x, self._P, self._ax, self._delta, dt, sample.yaw_rate, sample.ay,
-                                   self._pv, self._mu, self._q, self._r_imu)
+            x, P = self._imu_fn(self._x, self._P, self._ax, self._delta, dt, sample.yaw_rate, sample.ay)
             self._x, self._P = x, P.reshape(self._n, self._n, order="F")
             self._bound_mu()
             self._t = sample.t
@@ -186,7 +189,7 @@ class StateObserver:
         elif isinstance(sample, WheelSpeedSample):
             self._advance(sample.t)
             v_wheels = 0.5 * p.r * (sample.omega_rl + sample.omega_rr)
-            x, P = self._fn["wheel"](self._x, self._P, v_wheels, prm.r_wheel_speed**2)
+            x, P = self._wheel_fn(self._x, self._P, v_wheels)
             self._x, self._P = x, P.reshape(self._n, self._n, order="F")
             self._bound_mu()
         elif isinstance(sample, EpsSample):

@@ -44,7 +44,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from .ccompile import CompiledFunction, compile_function
+from .ccompile import CompiledFunction, bind, compile_function
 from .params import ParamError, VehicleParams
 from .tire import pacejka
 
@@ -187,8 +187,10 @@ class VehiclePlant:
             )
         self.params = params
         self.dt = float(dt)
-        self._f, _, self._chunks = _functions()
+        self._f, _, chunks = _functions()
         self._p = vehicle_vector(params)
+        # the n-step chunks with this plant's parameters and step bound once
+        self._chunk, self._single = bind(chunks[CHUNK], self._p, self.dt), bind(chunks[1], self._p, self.dt)
         self._state = initial_state(params)
         self._t = 0.0
         self._force: tuple[float, float] | None = None
@@ -220,11 +222,11 @@ class VehiclePlant:
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
             raise ValueError(f"n = {n!r} is invalid: expected a positive number of steps")
         state = self._state
-        chunk, single = self._chunks[CHUNK], self._chunks[1]
+        chunk, single = self._chunk, self._single
         for _ in range(n // CHUNK):
-            state, force = chunk(state, u, self._p, self.dt)
+            state, force = chunk(state, u)
         for _ in range(n % CHUNK):
-            state, force = single(state, u, self._p, self.dt)
+            state, force = single(state, u)
         self._state = np.asarray(state, dtype=float).ravel()
         force = np.asarray(force, dtype=float).ravel()
         self._force = (float(force[0]), float(force[1]))
