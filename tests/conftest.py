@@ -11,7 +11,7 @@ from typing import Iterator
 
 import pytest
 
-from isolation import claim_domain
+from isolation import claim_domain, realtime_slot
 from ros2_prefix import dds_env, ros_env  # noqa: F401 - fixtures of the ROS 2 prefix tests
 
 SESSION_MARK = "MOOSE_TEST_SESSION"
@@ -62,6 +62,16 @@ def reaper() -> Iterator[None]:
     assert proc.stdin is not None
     proc.stdin.close()  # the run is over: end what it left behind
     proc.wait(timeout=30)
+
+
+@pytest.fixture(autouse=True)
+def realtime(request: pytest.FixtureRequest) -> Iterator[None]:
+    """A test marked ``realtime`` holds the machine's real-time slot (tests/isolation.py) while it runs."""
+    if request.node.get_closest_marker("realtime") is None:
+        yield
+        return
+    with realtime_slot():
+        yield
 
 
 @pytest.fixture(scope="session", autouse=True)

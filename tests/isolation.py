@@ -6,15 +6,23 @@ even on SIGKILL), and only if Cyclone DDS's discovery port of that domain (7400 
 RTPS well-known port) can be bound on loopback, so a graph left over from another run is noticed.
 UDP ports for the CAN bus are taken from the kernel (bind to port 0) and held by a lock file too,
 so two concurrent runs never share a bus.
+
+Tests whose verdict depends on the wall clock (a graph paced in real time, the CAN bridge's schedule under a
+flood) hold the machine's **real-time slot** (:func:`realtime_slot`, marker ``realtime``): one such test at a
+time on the machine, the others of concurrent runs wait for it.  The graph needs cores of its own to keep
+its timing (docs/design.md, "The graph on rclpy"); two runs that each start eight node processes at once
+take them from each other.
 """
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import os
 import socket
 import tempfile
+import time
 from pathlib import Path
-from typing import IO
+from typing import IO, Iterator
 
 LOCK_DIR = Path(tempfile.gettempdir()) / "moose-test-locks"
 DOMAIN_IDS = range(1, 200)
@@ -66,3 +74,40 @@ def claim_udp_port() -> int:
         if _lock(f"udp-port-{port}"):
             return port
     raise RuntimeError("no free UDP port found")
+
+
+REALTIME_WAIT = 3600.0
+"""Seconds a test waits for the real-time slot before it fails (another run's graph tests hold it meanwhile)."""
+
+_depth: dict[str, int] = {}
+"""Nesting depth of :func:`realtime_slot` per slot in this process (a module fixture and its tests both ask)."""
+
+
+@contextlib.contextmanager
+def realtime_slot(wait: float = REALTIME_WAIT, name: str = "realtime") -> Iterator[None]:
+    """Hold the machine's real-time slot ``name`` (an exclusive ``flock``; re-entrant within this process)."""
+    if _depth.get(name):
+        _depth[name] += 1
+        try:
+            yield
+        finally:
+            _depth[name] -= 1
+        return
+    LOCK_DIR.mkdir(parents=True, exist_ok=True)
+    path = LOCK_DIR / name
+    with open(path, "w", encoding="utf-8") as handle:
+        deadline = time.monotonic() + wait
+        while True:
+            try:
+                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                if time.monotonic() > deadline:
+                    raise RuntimeError(f"the real-time slot {path} stayed held by another run for {wait} s") from None
+                time.sleep(0.2)
+        _depth[name] = 1
+        try:
+            yield
+        finally:
+            _depth[name] = 0
+            fcntl.flock(handle, fcntl.LOCK_UN)

@@ -33,7 +33,7 @@ import pytest
 from can.interfaces.udp_multicast.bus import SO_TIMESTAMPNS
 from can.interfaces.udp_multicast.utils import unpack_message
 
-from isolation import claim_udp_port
+from isolation import claim_udp_port, realtime_slot
 from moose.canbus.codec import Codec
 
 FLOOD_RATE = 100_000
@@ -230,7 +230,8 @@ def gaps(times: list[float]) -> list[float]:
 
 @pytest.fixture(scope="module")
 def flood() -> dict[str, Any]:
-    return flood_run()
+    with realtime_slot():
+        return flood_run()
 
 
 def test_the_flood_reached_the_bridge_and_was_reported(flood: dict[str, Any]) -> None:

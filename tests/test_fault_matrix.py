@@ -33,6 +33,7 @@ def can_bus() -> dict[str, object]:
 
 @pytest.mark.graph
 @pytest.mark.slow
+@pytest.mark.realtime
 @pytest.mark.parametrize("graph, fault", CASES, ids=[f"{g}-{f.node}-{f.action}" for g, f in CASES])
 def test_fault(graph: str, fault: Fault, can_bus: dict[str, object]) -> None:
     summary = run_case(graph, fault, rate=RATE, params=can_bus if graph == "can" else None)

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import pytest
 
+from isolation import realtime_slot
 from moose.config import load_config
 from moose.metrics import summarize
 from moose.scenario import load_scenario
@@ -27,7 +28,7 @@ from moose_ros.bag import read_bag
 from moose_ros.interfaces import from_rosbags
 from moose_ros.launch import launch
 
-pytestmark = [pytest.mark.graph, pytest.mark.slow]
+pytestmark = [pytest.mark.graph, pytest.mark.slow, pytest.mark.realtime]
 
 SCENARIO = "paper_v6_w2.4"
 ACCEL_TOLERANCE = 0.6
@@ -50,7 +51,8 @@ benchmarks' business: bench/bench_graph.py)."""
 @pytest.fixture(scope="module")
 def graph_bag(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
     path = tmp_path_factory.mktemp("equivalence") / "bag"
-    summary = launch(load_scenario(SCENARIO), {"scenario": SCENARIO}, out=io.StringIO(), bag=path, rate=RATE)
+    with realtime_slot():
+        summary = launch(load_scenario(SCENARIO), {"scenario": SCENARIO}, out=io.StringIO(), bag=path, rate=RATE)
     return path, summary
 
 

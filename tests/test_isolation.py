@@ -2,6 +2,7 @@
 
 * Two test runs at once claim different DDS domains and UDP ports (tests/isolation.py), also when a domain's
   discovery port is taken by a process that holds no lock (a graph left running by something else).
+* The real-time slot is held by one process at a time: another waits for it, and fails after its wait.
 * A process a test starts — in its own process group, so a signal to the run's group misses it — ends with the
   test run even when pytest is SIGKILLed (tests/conftest.py's reaper).
 """
@@ -19,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from isolation import DOMAIN_IDS
+from isolation import DOMAIN_IDS, realtime_slot
 
 TESTS = Path(__file__).resolve().parent
 
@@ -126,3 +127,36 @@ def test_a_node_started_by_a_test_ends_when_pytest_is_killed(tmp_path: Path) -> 
         if inner.poll() is None:
             inner.kill()
             inner.wait()
+
+
+HOLD = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, sys.argv[1])
+    from isolation import realtime_slot
+    with realtime_slot(name=sys.argv[2]):
+        print("held", flush=True)
+        sys.stdin.read()  # until the test closes our stdin
+""")
+
+
+def test_the_real_time_slot_is_one_process_at_a_time() -> None:
+    name = f"realtime-test-{os.getpid()}"  # not the real slot: a concurrent run's graph tests may hold that one
+    holder = subprocess.Popen([sys.executable, "-c", HOLD, str(TESTS), name], stdin=subprocess.PIPE,
+                              stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
+        start = time.monotonic()
+        with pytest.raises(RuntimeError, match="stayed held by another run for 0.5 s"):
+            with realtime_slot(wait=0.5, name=name):
+                pass
+        assert time.monotonic() - start >= 0.5
+        assert holder.stdin is not None
+        holder.stdin.close()  # the holder lets go
+        holder.wait(timeout=10)
+        with realtime_slot(wait=10.0, name=name):
+            with realtime_slot(wait=0.0, name=name):  # re-entrant in one process: no wait, no deadlock
+                pass
+    finally:
+        if holder.poll() is None:
+            holder.kill()
+            holder.wait()

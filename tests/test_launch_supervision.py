@@ -21,7 +21,7 @@ from moose_ros.faults import Fault
 from moose_ros.launch import launch
 from moose_ros.process import descendants, spawn, stop
 
-pytestmark = [pytest.mark.graph, pytest.mark.slow]
+pytestmark = [pytest.mark.graph, pytest.mark.slow, pytest.mark.realtime]
 
 MOOSE = [sys.executable, "-m", "moose.cli"]
 NODES_FULL = 7

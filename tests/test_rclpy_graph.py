@@ -45,7 +45,7 @@ from moose_ros.graph import FRAME_IMU, FRAME_ODOM, FRAME_TRUTH, GRAPHS, TOPICS
 from moose_ros.interfaces import typestore
 from moose_ros.launch import node_overrides
 
-pytestmark = [pytest.mark.graph, pytest.mark.slow]
+pytestmark = [pytest.mark.graph, pytest.mark.slow, pytest.mark.realtime]
 
 SCENARIO = "paper_v7_tau2"
 RATE = 0.25

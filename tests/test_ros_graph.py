@@ -26,7 +26,7 @@ from moose_ros.faults import Fault
 from moose_ros.launch import launch
 from moose_ros.runtime import DdsNode
 
-pytestmark = [pytest.mark.graph, pytest.mark.slow]
+pytestmark = [pytest.mark.graph, pytest.mark.slow, pytest.mark.realtime]
 
 CAN_SCENARIO = "paper_v7_tau2"
 GRAPH_RATE = 0.5

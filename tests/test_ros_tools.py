@@ -37,6 +37,7 @@ from typing import Any, Iterator, Optional
 
 import pytest
 
+from isolation import realtime_slot
 from moose_ros.graph import GRAPHS, TOPICS, publishes, subscribes
 from moose_ros.interfaces import type_hash, typestore
 
@@ -72,6 +73,11 @@ class Graph:
 
 @pytest.fixture(scope="module")
 def graph(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Graph]:
+    with realtime_slot():
+        yield from _graph(tmp_path_factory)
+
+
+def _graph(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Graph]:
     config = tmp_path_factory.mktemp("dds-localhost") / "cyclonedds.xml"
     config.write_text(LOCALHOST_CYCLONE)
     env = {**os.environ, "CYCLONEDDS_URI": config.as_uri(), "MOOSE_RUNTIME": "dds"}
