@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from isolation import DOMAIN_IDS, realtime_slot
+from isolation import DOMAIN_IDS, LOCK_DIR, realtime_slot
 
 TESTS = Path(__file__).resolve().parent
 
@@ -160,3 +160,4 @@ def test_the_real_time_slot_is_one_process_at_a_time() -> None:
         if holder.poll() is None:
             holder.kill()
             holder.wait()
+        (LOCK_DIR / name).unlink(missing_ok=True)
