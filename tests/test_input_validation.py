@@ -248,13 +248,14 @@ def test_every_node_drops_counts_and_reports_hostile_input_on_every_topic_it_sub
 
         expected = {(n, t.name) for n in names for t in subscribes(n) if t.name in HOSTILE}
 
+        # a best-effort reader (the sensor topics' subscribers) may lose a sample under load: it must count some
         def reported() -> bool:
-            return all(counted(n, t) == sent[t] or (not TOPICS[t].qos.reliable and counted(n, t) > 0)
+            return all(counted(n, t) == sent[t] or (not TOPICS[t].subscription_qos.reliable and counted(n, t) > 0)
                        for n, t in expected)
 
         graph.spin_until(lambda: reported() and graph.warned >= set(names), 10.0)
         missing = {(n, t): (counted(n, t), sent[t]) for n, t in expected if counted(n, t) != sent[t]}
-        assert all(not TOPICS[t].qos.reliable and got > 0 for (n, t), (got, _) in missing.items()), missing
+        assert all(not TOPICS[t].subscription_qos.reliable and got > 0 for (n, t), (got, _) in missing.items()), missing
         assert graph.warned == set(names)  # each one said so at WARN
         assert all(graph.procs[n].poll() is None for n in names)  # and none of them exited
     finally:
