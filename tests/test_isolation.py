@@ -2,6 +2,8 @@
 
 * Two test runs at once claim different DDS domains and UDP ports (tests/isolation.py), also when a domain's
   discovery port is taken by a process that holds no lock (a graph left running by something else).
+* Two test runs at once, of tests that start graphs on DDS, use CAN buses on UDP and hold the real-time slot,
+  both pass (the whole suite twice at once is run by hand: 2 × 30 min does not fit CI's budget).
 * The real-time slot is held by one process at a time: another waits for it, and fails after its wait.
 * A process a test starts — in its own process group, so a signal to the run's group misses it — ends with the
   test run even when pytest is SIGKILLed (tests/conftest.py's reaper).
@@ -161,3 +163,28 @@ def test_the_real_time_slot_is_one_process_at_a_time() -> None:
             holder.kill()
             holder.wait()
         (LOCK_DIR / name).unlink(missing_ok=True)
+
+
+CONCURRENT = ["tests/test_ros_runtime.py", "tests/test_can_udp.py",
+              "tests/test_launch_supervision.py::test_a_killed_simulator_is_incomplete_and_reported"]
+"""Nodes talking over DDS, CAN buses on UDP multicast and loopback ports, a whole graph launched and judged
+(real-time slot): what two runs sharing a domain, a port or the cores would break."""
+
+
+@pytest.mark.graph
+@pytest.mark.slow
+def test_two_test_runs_at_once_both_pass(tmp_path: Path) -> None:
+    env = {k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"}  # each run claims its own
+    runs = [subprocess.Popen([sys.executable, "-m", "pytest", "-q", "-p", "no:randomly", "-p", "no:cacheprovider",
+                              "--basetemp", str(tmp_path / f"run{i}"), *CONCURRENT], cwd=TESTS.parent, env=env,
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) for i in range(2)]
+    try:
+        outputs = [run.communicate(timeout=600)[0] for run in runs]
+    finally:
+        for run in runs:
+            if run.poll() is None:
+                run.kill()
+                run.wait()
+    for run, output in zip(runs, outputs):
+        assert run.returncode == 0, output[-3000:]
+        assert " passed" in output, output[-3000:]
