@@ -179,7 +179,7 @@ def test_two_test_runs_at_once_both_pass(tmp_path: Path) -> None:
                               "--basetemp", str(tmp_path / f"run{i}"), *CONCURRENT], cwd=TESTS.parent, env=env,
                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) for i in range(2)]
     try:
-        outputs = [run.communicate(timeout=600)[0] for run in runs]
+        outputs = [run.communicate(timeout=1200)[0] for run in runs]  # a concurrent suite may hold the slot
     finally:
         for run in runs:
             if run.poll() is None:
