@@ -172,6 +172,69 @@ def test_deterministic_for_a_seed(run: Run) -> None:
     assert not np.array_equal(other.est, run.est[:n])
 
 
+def _ticks(samples: list[Any]) -> list[list[Any]]:
+    """The samples grouped by delivery time, as the sensors deliver them at each tick."""
+    ticks: list[list[Any]] = []
+    for sample in samples:
+        if ticks and ticks[-1][0].t == sample.t:
+            ticks[-1].append(sample)
+        else:
+            ticks.append([sample])
+    return ticks
+
+
+@pytest.mark.parametrize(("estimate_mu", "eps"), [(False, True), (True, True), (False, False)])
+def test_update_all_is_update_one_by_one_bit_for_bit(run: Run, estimate_mu: bool, eps: bool) -> None:
+    """The lockstep loop's batched update (IMU and wheel speeds fused in one compiled call) against one
+    sample at a time, over 8 s with late GPS fixes (whose replays fuse the pairs again); also with μ
+    estimated (no fusion) and without EPS samples (the fused pair ends a tick)."""
+    params = ObserverParams(estimate_mu=estimate_mu)
+    start = StateEstimate(0.0, 0.0, 0.0, 0.0, 5.5, 0.0, 0.0, 0.0)
+    single, batched = StateObserver(params, P, start), StateObserver(params, P, start)
+    fused = 0
+    if not estimate_mu:  # (with μ estimated every sample goes through update)
+        inner = batched._imu_wheel_fn
+
+        def counting(*args: Any) -> Any:
+            nonlocal fused
+            fused += 1
+            return inner(*args)
+
+        batched._imu_wheel_fn = counting
+    ticks = _ticks([s for s in run.samples if eps or not isinstance(s, EpsSample)])
+    assert sum(isinstance(s, GpsSample) for s in run.samples) == 8
+    for tick in ticks:
+        for sample in tick:
+            single.update(sample)
+        batched.update_all(tick)
+        assert batched.estimate() == single.estimate()
+        assert np.array_equal(batched.covariance, single.covariance)
+        assert batched.mu_estimate == single.mu_estimate
+    # each tick once, and the 20 ticks of the GPS lag again at each of the 8 late fixes
+    assert fused == (0 if estimate_mu else len(ticks) + 8 * round(LAG / DT))
+
+
+def test_update_all_stops_at_an_invalid_sample_as_one_by_one_does() -> None:
+    imu, wheel = ImuSample(0.51, 0.1, 0.3, 0.05), WheelSpeedSample(0.51, V0 / P.r, V0 / P.r)
+    bad_wheel, bad_imu = WheelSpeedSample(0.51, 1.0, math.inf), ImuSample(0.51, math.nan, 0.3, 0.05)
+    # a bad wheel-speed sample after a good IMU sample: the IMU sample is fused, then the error
+    reference, batched = _fresh(), _fresh()
+    reference.update(imu)
+    with pytest.raises(ValueError, match=r"sample\.omega_rr = inf is invalid"):
+        batched.update_all([imu, bad_wheel, EpsSample(0.51, 0.0)])
+    assert batched.estimate() == reference.estimate() != _fresh().estimate()
+    # a bad IMU sample first: nothing is fused
+    untouched = _fresh()
+    with pytest.raises(ValueError, match=r"sample\.ax = nan is invalid"):
+        untouched.update_all([bad_imu, wheel])
+    assert untouched.estimate() == _fresh().estimate()
+    # and the filter goes on from there exactly as one fed sample by sample
+    batched.update_all([ImuSample(0.52, 0.1, 0.3, 0.05), WheelSpeedSample(0.52, V0 / P.r, V0 / P.r)])
+    reference.update(ImuSample(0.52, 0.1, 0.3, 0.05))
+    reference.update(WheelSpeedSample(0.52, V0 / P.r, V0 / P.r))
+    assert batched.estimate() == reference.estimate()
+
+
 def test_estimated_friction_removes_the_sideslip_bias_of_a_wrong_model() -> None:
     """Plant μ = 0.35, observer model μ = 0.5: the cornering stiffness is 43 % too high."""
     fixed = double_lane_change(plant_mu=0.35, model_mu=0.5)

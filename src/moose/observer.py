@@ -17,6 +17,10 @@ by ``v_low`` as in the plant.  Measurements:
   later samples are replayed (exact re-propagation; at 1 Hz this costs about
   20 predict steps per fix).  A fix older than the history is fused on arrival.
 
+The lockstep loop hands the filter each tick's samples at once (:meth:`StateObserver.update_all`):
+the IMU and wheel-speed samples of one time are then fused in one compiled call that calls the two
+steps in turn, with the same result bit for bit as one sample at a time (what the observer node does).
+
 Prediction runs at each IMU sample (explicit Euler over the sample interval,
 inputs held from the previous samples); a wheel-speed, EPS or GPS sample
 stamped later than the last sample first predicts to its own time, so
@@ -35,7 +39,7 @@ import math
 import operator
 from collections import deque
 from functools import lru_cache
-from typing import Any, Union
+from typing import Any, Sequence, Union
 
 import casadi as ca
 import numpy as np
@@ -79,6 +83,8 @@ class StateObserver:
         self._predict_fn = bind(fns["predict"], pv, self._mu, q_squared)
         self._imu_fn = bind(fns["imu"], pv, self._mu, q_squared, r_imu)
         self._wheel_fn = bind(fns["wheel"], params.r_wheel_speed**2)
+        self._imu_wheel_fn = (bind(fns["imu_wheel"], pv, self._mu, q_squared, r_imu, params.r_wheel_speed**2)
+                              if "imu_wheel" in fns else None)
         self._r_gps = np.array([params.r_gps_position**2] * 2 + [params.r_gps_velocity**2] * 2)
         self.reset(initial or StateEstimate(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
 
@@ -153,6 +159,54 @@ class StateObserver:
         while history and history[0][0] < oldest:
             history.popleft()
         self._apply(sample)
+
+    def update_all(self, samples: Sequence[Sample]) -> None:
+        """:meth:`update` on each of ``samples`` in order, with the same result bit for bit.
+
+        An IMU sample directly followed by a wheel-speed sample of the same time (the sensors' usual
+        100 Hz tick) is fused in one compiled call.  On an invalid sample the samples before it are
+        fused and the error is raised, as the calls one by one would do.
+        """
+        i, n = 0, len(samples)
+        while i < n:
+            sample, following = samples[i], samples[i + 1] if i + 1 < n else None
+            if (type(sample) is ImuSample and type(following) is WheelSpeedSample and following.t == sample.t
+                    and self._imu_wheel(sample, following)):
+                i += 2
+            else:
+                self.update(sample)
+                i += 1
+
+    def _imu_wheel(self, imu: ImuSample, wheel: WheelSpeedSample) -> bool:
+        """Fuse an IMU and a wheel-speed sample of one time in one call; False (nothing fused) if one is invalid
+        or μ is estimated (it is projected onto its bounds between the two updates)."""
+        fused = self._imu_wheel_fn
+        if fused is None:
+            return False
+        try:
+            self._validate(imu)
+            self._validate(wheel)
+        except ValueError:
+            return False
+        history = self._history
+        self._fuse_pair(fused, imu, wheel, history)
+        oldest = wheel.t - self.params.history_s
+        while history and history[0][0] < oldest:
+            history.popleft()
+        return True
+
+    def _fuse_pair(self, fused: Any, imu: ImuSample, wheel: WheelSpeedSample, history: deque) -> None:
+        """Fuse a valid IMU and wheel-speed sample of one time with ``fused`` (the compiled ``imu_wheel`` step),
+        appending to ``history`` the snapshot before each, as :meth:`update` does."""
+        history.append((self._t, self._x, self._P, self._delta, self._ax, imu))
+        dt = max(imu.t - self._t, 0.0)
+        v_wheels = 0.5 * self.vehicle.r * (wheel.omega_rl + wheel.omega_rr)
+        x_imu, P_imu, x, P = fused(self._x, self._P, self._ax, self._delta, dt, imu.yaw_rate, imu.ay, v_wheels)
+        n = self._n
+        history.append((imu.t, x_imu, P_imu.reshape(n, n, order="F"), self._delta, imu.ax, wheel))
+        self._x, self._P = x, P.reshape(n, n, order="F")
+        self._t = imu.t
+        self._ax = imu.ax
 
     def _validate(self, sample: Sample) -> None:
         fields = _FIELDS.get(type(sample))
@@ -235,10 +289,18 @@ class StateObserver:
         self._t = max(t0, fix.t_measured)
         self._gps_correct(fix)
         rebuilt: deque = deque(entries[:index])
-        for entry in entries[index:]:
-            sample = entry[5]
-            rebuilt.append((self._t, self._x, self._P, self._delta, self._ax, sample))
-            self._apply(sample)
+        replay = [entry[5] for entry in entries[index:]]
+        i, n, fused = 0, len(replay), self._imu_wheel_fn
+        while i < n:  # the samples were validated on arrival; an IMU and wheel-speed pair is fused again
+            sample, following = replay[i], replay[i + 1] if i + 1 < n else None
+            if (fused is not None and type(sample) is ImuSample and type(following) is WheelSpeedSample
+                    and following.t == sample.t):
+                self._fuse_pair(fused, sample, following, rebuilt)
+                i += 2
+            else:
+                rebuilt.append((self._t, self._x, self._P, self._delta, self._ax, sample))
+                self._apply(sample)
+                i += 1
         self._history = rebuilt
         self._t = max(self._t, now)
 
@@ -295,7 +357,25 @@ def _ekf(estimate_mu: bool = False) -> dict[str, Any]:
     PHt = P[:, 3]
     gain = PHt / (PHt[3] + r_v)
     wheel = ca.Function(f"{prefix}_wheel", [x, P, z_v, r_v], [x + gain * (z_v - x[3]), P - ca.mtimes(gain, PHt.T)])
-    return {name: _compiled(fn) for name, fn in (("predict", predict), ("imu", imu), ("wheel", wheel))}
+    steps = {"predict": predict, "imu": imu, "wheel": wheel}
+    if not estimate_mu:  # (with μ estimated, μ is projected onto its bounds between the two updates)
+        steps["imu_wheel"] = _imu_then_wheel(imu, wheel, f"{prefix}_imu_wheel")
+    return {name: _compiled(fn) for name, fn in steps.items()}
+
+
+def _imu_then_wheel(imu: ca.Function, wheel: ca.Function, name: str) -> ca.Function:
+    """The sensors' usual 100 Hz tick in one call: ``imu`` then ``wheel`` on its result.
+
+    ``(x, P, ax, delta, dt, z_gamma, z_ay, z_v, vehicle, mu, q, r, r_v) -> (x', P', x'', P'')``, where
+    (x', P') is the state after the IMU sample (the wheel-speed sample's snapshot for a late GPS fix).
+    The two steps are called, not re-derived, so the result is bit for bit that of the two calls.
+    """
+    args = [ca.MX.sym(imu.name_in(i), imu.sparsity_in(i)) for i in range(imu.n_in())]
+    z_v, r_v = ca.MX.sym("z_v"), ca.MX.sym("r_v")
+    x_imu, P_imu = imu(*args)
+    x_wheel, P_wheel = wheel(x_imu, P_imu, z_v, r_v)
+    inputs = [*args[:7], z_v, *args[7:], r_v]
+    return ca.Function(name, inputs, [x_imu, P_imu, x_wheel, P_wheel])
 
 
 def _compiled(fn: ca.Function) -> Any:

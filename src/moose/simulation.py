@@ -121,7 +121,7 @@ class ClosedLoop:
         estimates: list = []
         threats: list = []
         # the blocks' methods, looked up once (the loop runs 100 times per simulated second)
-        plant, observe, sense, detect = self.plant, self.observer.update, self.sensors.sample, self.detector.update
+        plant, observe, sense, detect = self.plant, self.observer.update_all, self.sensors.sample, self.detector.update
         steps_per_motion = sim.plant_steps_per_motion
         for k in range(n_motion + 1):
             t = k * dt_motion
@@ -129,13 +129,14 @@ class ClosedLoop:
             specific_force = plant.specific_force if k else plant.imu_specific_force(state, u)
             delivered = sense(t, state, specific_force)
             samples.extend(delivered)
+            observe(delivered)
             for sample in delivered:
-                observe(sample)
-                if isinstance(sample, EpsSample):
+                if type(sample) is EpsSample:
                     delta_meas = sample.delta
             estimate = self.observer.estimate()
             estimates.append(estimate)
-            appeared = appeared or self.scenario.appears(float(state[0]), float(state[3]))
+            true = state.tolist()
+            appeared = appeared or self.scenario.appears(true[0], true[3])
             visible = [self.scenario.danger_zone] if appeared else []
             previous = threat
             threat = detect(t, estimate, visible)
@@ -155,7 +156,7 @@ class ClosedLoop:
                 row.delta_ref = reference.delta
             u = self.motion.step(reference, estimate, delta_meas, dt_motion)
             rows.append((
-                t, *state[:6].tolist(), state[8], state[6], state[7],
+                t, *true[:6], true[8], true[6], true[7],
                 estimate.x, estimate.y, estimate.theta, estimate.vx, estimate.vy, estimate.gamma,
                 row.delta_ref, row.delta_mpc, row.vx_ref, row.weight_mpc, *u.tolist(), float(threat is not None),
             ))
