@@ -66,6 +66,8 @@ class ObstacleDetector:
 
     def update(self, t: float, estimate: StateEstimate, obstacles: Sequence[Obstacle]) -> Optional[Threat]:
         """The threat of the nearest relevant visible zone at time ``t``, or None."""
+        if not obstacles and not self._latched:  # nothing seen, nothing to forget (most ticks of a run)
+            return None
         visible = set(obstacles)
         for gone in [o for o in self._latched if o not in visible or o.x_max + self.params.pass_margin < estimate.x]:
             del self._latched[gone]

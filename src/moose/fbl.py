@@ -40,18 +40,29 @@ class FeedbackLinearization:
         self._fzr = vehicle.mu * vehicle.Fzr
 
     def reference(self, accel: np.ndarray, estimate: StateEstimate) -> Reference:
-        p = self.vehicle
+        """δ* and v_x* for the global acceleration ``accel`` = [v̇_X*, v̇_Y*] at ``estimate``."""
+        a_x, a_y = self._body(accel, estimate)
+        vx_dot = a_x + estimate.vy * estimate.gamma
+        vx_ref = max(estimate.vx + self.t_s * vx_dot, self.params.v_min_ref)
+        return Reference(delta=self._steering(a_y, estimate), vx=float(vx_ref))
+
+    def steering(self, accel: np.ndarray, estimate: StateEstimate) -> float:
+        """δ* alone (what the motion-rate re-evaluation between planning instants needs)."""
+        return self._steering(self._body(accel, estimate)[1], estimate)
+
+    @staticmethod
+    def _body(accel: np.ndarray, estimate: StateEstimate) -> tuple[float, float]:
+        """[a_x, a_y] = R(−θ) [v̇_X*, v̇_Y*]."""
         aX, aY = float(accel[0]), float(accel[1])
         c, s = math.cos(estimate.theta), math.sin(estimate.theta)
-        a_x = c * aX + s * aY
-        a_y = -s * aX + c * aY
+        return c * aX + s * aY, -s * aX + c * aY
+
+    def _steering(self, a_y: float, estimate: StateEstimate) -> float:
+        p = self.vehicle
         v_bar = max(estimate.vx, p.v_low)
         beta = estimate.vy / v_bar
         alpha_r = p.lr * estimate.gamma / v_bar - beta
         f_front = p.m * a_y - pacejka(alpha_r, self._fzr, p.By, p.Cy)
         alpha_f = inverse_lateral(f_front, self._fzf, p.By, p.Cy)
         delta = beta + p.lf * estimate.gamma / v_bar + alpha_f
-        delta = min(max(delta, -p.delta_max), p.delta_max)
-        vx_dot = a_x + estimate.vy * estimate.gamma
-        vx_ref = max(estimate.vx + self.t_s * vx_dot, self.params.v_min_ref)
-        return Reference(delta=float(delta), vx=float(vx_ref))
+        return float(min(max(delta, -p.delta_max), p.delta_max))

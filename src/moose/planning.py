@@ -137,7 +137,7 @@ class PlanningStep:
         else:
             blend = self.weight.blend(mpc, msf, threat, estimate)
         reference = self.fbl.reference(blend.accel[0], estimate)
-        delta_mpc = self.fbl.reference(mpc.accel[0], estimate).delta if mpc is not None else float("nan")
+        delta_mpc = self.fbl.steering(mpc.accel[0], estimate) if mpc is not None else float("nan")
         self.guess = self.weight.next_initial_guess(blend)
         self.applied = blend.accel[0]
         self.reference = reference
@@ -150,4 +150,4 @@ class PlanningStep:
             return None
         if not self.fbl_at_motion_rate:
             return self.reference
-        return Reference(delta=self.fbl.reference(self.applied, estimate).delta, vx=self.reference.vx)
+        return Reference(delta=self.fbl.steering(self.applied, estimate), vx=self.reference.vx)

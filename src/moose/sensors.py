@@ -55,34 +55,37 @@ class Sensors:
         self.params = params
         self.vehicle = vehicle
         self.rng = rng
-        self._rates = {"imu": params.imu_rate_hz, "wheel": params.wheel_rate_hz, "eps": params.eps_rate_hz,
-                       "gps": params.gps_rate_hz}
-        self._last: dict[str, float] = {name: -math.inf for name in self._rates}
+        self._rates = (params.imu_rate_hz, params.wheel_rate_hz, params.eps_rate_hz, params.gps_rate_hz)
+        """Rates of the IMU, the wheel speeds, the EPS and the GPS (Hz), in the order of :meth:`_due`."""
+        self._last = [-math.inf] * len(self._rates)
         self._pending: deque[GpsSample] = deque()
 
-    def _due(self, name: str, t: float) -> bool:
-        """True once per sample index k = ⌊t f⌋ of sensor ``name``."""
-        index = math.floor(t * self._rates[name] + _TICK_TOLERANCE)
-        if index <= self._last[name]:
-            return False
-        self._last[name] = index
-        return True
+    def _due(self, t: float) -> list[bool]:
+        """Per sensor (IMU, wheel speeds, EPS, GPS): True once per sample index k = ⌊t f⌋."""
+        last = self._last
+        due = []
+        for i, rate in enumerate(self._rates):
+            index = math.floor(t * rate + _TICK_TOLERANCE)
+            due.append(index > last[i])
+            if index > last[i]:
+                last[i] = index
+        return due
 
     def sample(self, t: float, state: np.ndarray, specific_force: tuple[float, float]) -> list[Sample]:
         """Samples delivered at ``t`` from the true ``state`` and the IMU ``specific_force`` (a_x, a_y)."""
         p, n = self.params, self.rng.normal
         out: list[Sample] = []
-        imu, wheel, eps = self._due("imu", t), self._due("wheel", t), self._due("eps", t)
+        imu, wheel, eps, gps = self._due(t)
         if imu and wheel and eps:
             # the usual tick: the same six draws, in the same order, as the three calls below (a
             # Generator's normal(0, s) is s times its next standard normal), in one call
             z = self.rng.standard_normal(6).tolist()
-            out.append(ImuSample(t, float(specific_force[0] + p.accel_std * z[0]),
-                                 float(specific_force[1] + p.accel_std * z[1]),
-                                 float(state[GAMMA] + p.gyro_std * z[2])))
-            out.append(WheelSpeedSample(t, float(state[OMEGA_RL] + p.wheel_std * z[3]),
-                                        float(state[OMEGA_RR] + p.wheel_std * z[4])))
-            out.append(EpsSample(t, float(state[DELTA] + p.eps_std * z[5])))
+            true = state.tolist()  # Python floats: the same sums as with NumPy's scalars, made faster
+            a_x, a_y = specific_force
+            out.append(ImuSample(t, float(a_x) + p.accel_std * z[0], float(a_y) + p.accel_std * z[1],
+                                 true[GAMMA] + p.gyro_std * z[2]))
+            out.append(WheelSpeedSample(t, true[OMEGA_RL] + p.wheel_std * z[3], true[OMEGA_RR] + p.wheel_std * z[4]))
+            out.append(EpsSample(t, true[DELTA] + p.eps_std * z[5]))
         else:
             if imu:
                 e = n(0.0, 1.0, 3)
@@ -94,7 +97,7 @@ class Sensors:
                 out.append(WheelSpeedSample(t, float(state[OMEGA_RL] + e[0]), float(state[OMEGA_RR] + e[1])))
             if eps:
                 out.append(EpsSample(t, float(state[DELTA] + n(0.0, p.eps_std))))
-        if self._due("gps", t):
+        if gps:
             c, s = math.cos(state[THETA]), math.sin(state[THETA])
             vX = state[VX] * c - state[VY] * s
             vY = state[VX] * s + state[VY] * c

@@ -163,7 +163,8 @@ def _functions() -> tuple[ca.Function, ca.Function, dict[int, ca.Function | Comp
         x = s
         for _ in range(n):
             x = step(x, u, pv, dt)
-        chunk = ca.Function(f"moose_plant_chunk_{n}", [s, u, pv, dt], [x, f(x, u, pv)[1]])
+        # common subexpressions (the steering angle of the two mid stages, the parameters' products) once
+        chunk = ca.Function(f"moose_plant_chunk_{n}", [s, u, pv, dt], [x, f(x, u, pv)[1]], {"cse": True})
         chunks[n] = compile_function(chunk) or chunk
     return f, step, chunks
 
@@ -228,8 +229,8 @@ class VehiclePlant:
         for _ in range(n % CHUNK):
             state, force = single(state, u)
         self._state = np.asarray(state, dtype=float).ravel()
-        force = np.asarray(force, dtype=float).ravel()
-        self._force = (float(force[0]), float(force[1]))
+        a_x, a_y = np.asarray(force, dtype=float).ravel().tolist()
+        self._force = (a_x, a_y)
         self._t += n * self.dt
         return self._state.copy()
 

@@ -73,7 +73,7 @@ class WeightFunction:
     def steering_usage(self, mpc: PlanResult, estimate: StateEstimate) -> float:
         """ρ: the largest |δ| / δ_max the MPC's first ``n_rho`` accelerations need."""
         v = self.vehicle
-        rho = abs(self._fbl.reference(mpc.accel[0], estimate).delta) / v.delta_max
+        rho = abs(self._fbl.steering(mpc.accel[0], estimate)) / v.delta_max
         n = min(self.params.n_rho, len(mpc.accel), len(mpc.predicted))
         for k in range(1, n):
             vX, vY = float(mpc.predicted[k, 2]), float(mpc.predicted[k, 3])

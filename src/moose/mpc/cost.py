@@ -150,12 +150,10 @@ def kinematic_step(state: Any, accel: Any, t_s: float) -> tuple[Any, Any, Any, A
 
 def kinematic_rollout(state: np.ndarray, accel: np.ndarray, t_s: float) -> np.ndarray:
     """eq. (skin) with exact zero-order hold: (N+1, 4) states [x, y, v_X, v_Y] from (N, 2) accelerations."""
-    accel = np.asarray(accel, dtype=float).reshape(-1, 2)
-    out = np.empty((len(accel) + 1, 4))
-    out[0] = state
-    for k, a in enumerate(accel):
-        out[k + 1] = kinematic_step(out[k], a, t_s)
-    return out
+    rows = [tuple(np.asarray(state, dtype=float).reshape(4).tolist())]
+    for a in np.asarray(accel, dtype=float).reshape(-1, 2).tolist():  # on Python floats: the same sums, faster
+        rows.append(kinematic_step(rows[-1], a, t_s))
+    return np.array(rows, dtype=float)
 
 
 def speed_floor(vX0: float, n_p: int, t_s: float, a_x_max: float) -> np.ndarray:
