@@ -27,7 +27,7 @@ from .planning import PlanningRecord, PlanningStep, new_obstacle
 from .scenario import Scenario
 from .schema import Config, PlannerMode
 from .sensors import Sensors
-from .signals import EpsSample, Reference, StateEstimate, Threat
+from .signals import EpsSample, Obstacle, Reference, StateEstimate, Threat
 from .vehicle import VehiclePlant, initial_state
 
 TRACE_FIELDS = (
@@ -122,7 +122,10 @@ class ClosedLoop:
         threats: list = []
         # the blocks' methods, looked up once (the loop runs 100 times per simulated second)
         plant, observe, sense, detect = self.plant, self.observer.update_all, self.sensors.sample, self.detector.update
-        steps_per_motion = sim.plant_steps_per_motion
+        estimate_now, between, control = self.observer.estimate, self.step.reference_between, self.motion.step
+        steps_per_motion, steps_per_plan = sim.plant_steps_per_motion, self.config.motion_steps_per_plan
+        seen: list[Obstacle] = [self.scenario.danger_zone]
+        unseen: list[Obstacle] = []
         for k in range(n_motion + 1):
             t = k * dt_motion
             state = plant.state
@@ -133,28 +136,27 @@ class ClosedLoop:
             for sample in delivered:
                 if type(sample) is EpsSample:
                     delta_meas = sample.delta
-            estimate = self.observer.estimate()
+            estimate = estimate_now()
             estimates.append(estimate)
             true = state.tolist()
             appeared = appeared or self.scenario.appears(true[0], true[3])
-            visible = [self.scenario.danger_zone] if appeared else []
             previous = threat
-            threat = detect(t, estimate, visible)
+            threat = detect(t, estimate, seen if appeared else unseen)
             threats.append((t, threat))
             if threat is not None and first_threat is None:
                 first_threat = threat
             replan = new_obstacle(previous, threat)
             if k >= next_plan or replan:
-                next_plan = k + self.config.motion_steps_per_plan
+                next_plan = k + steps_per_plan
                 v_des = self.scenario.desired_speed(first_threat is not None)
                 record = self.step.plan(t, estimate, threat, v_des)
                 planning.append(record)
                 reference = record.reference
                 row = _Row(reference.delta, record.delta_mpc, reference.vx, record.blend.weight_mpc)
             else:
-                reference = self.step.reference_between(estimate) or reference
+                reference = between(estimate) or reference
                 row.delta_ref = reference.delta
-            u = self.motion.step(reference, estimate, delta_meas, dt_motion)
+            u = control(reference, estimate, delta_meas, dt_motion)
             rows.append((
                 t, *true[:6], true[8], true[6], true[7],
                 estimate.x, estimate.y, estimate.theta, estimate.vx, estimate.vy, estimate.gamma,
