@@ -58,7 +58,7 @@ _FIELDS: dict[type, tuple[str, ...]] = {
     EpsSample: ("t", "delta"),
     GpsSample: ("t", "t_measured", "x", "y", "vX", "vY"),
 }
-_GETTERS = {fields: operator.attrgetter(*fields) for fields in _FIELDS.values()}
+_GETTERS = {kind: operator.attrgetter(*fields) for kind, fields in _FIELDS.items()}
 """The fields of each sample type, read in one call."""
 MU = 6
 """Index of μ in the augmented state."""
@@ -209,14 +209,16 @@ class StateObserver:
         self._ax = imu.ax
 
     def _validate(self, sample: Sample) -> None:
-        fields = _FIELDS.get(type(sample))
-        if fields is None:
-            fields = next((f for kind, f in _FIELDS.items() if isinstance(sample, kind)), None)
-            if fields is None:
+        getter = _GETTERS.get(type(sample))
+        if getter is None:
+            kind = next((k for k in _FIELDS if isinstance(sample, k)), None)  # a subclass of a sample type
+            if kind is None:
                 raise TypeError(f"sample = {sample!r} is not a sensor sample (ImuSample, GpsSample, "
                                 "WheelSpeedSample or EpsSample)")
-        values = _GETTERS[fields](sample)
+            getter = _GETTERS[kind]
+        values = getter(sample)
         if not all(map(math.isfinite, values)):
+            fields = next(f for k, f in _FIELDS.items() if isinstance(sample, k))
             name, value = next((n, v) for n, v in zip(fields, values) if not math.isfinite(v))
             raise ValueError(f"sample.{name} = {value!r} is invalid: expected a finite number")
         if sample.t + 1e-9 < self._t:

@@ -8,6 +8,7 @@ eq. (skin); every quantity is in SI units.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import Any, Literal
 
 import numpy as np
@@ -76,6 +77,14 @@ class Obstacle:
             raise ParamError(f"x_min = {self.x_min!r} is invalid: expected below x_max = {self.x_max!r}")
         if not self.y_min < self.y_max:
             raise ParamError(f"y_min = {self.y_min!r} is invalid: expected below y_max = {self.y_max!r}")
+
+    @functools.cached_property
+    def _hash(self) -> int:
+        return hash((self.x_min, self.x_max, self.y_min, self.y_max))
+
+    def __hash__(self) -> int:
+        """The hash of the fields, computed once (the detector looks a zone up several times per tick)."""
+        return self._hash
 
     def contains(self, x: float, y: float) -> bool:
         """Whether the point (x, y) lies in the closed box."""
