@@ -55,6 +55,17 @@ def test_bound_instances_keep_their_own_trailing_inputs(compiled: CompiledFuncti
     np.testing.assert_allclose(compiled(A, x, 3.0, np.zeros(3))[0], A @ x * 3.0)  # nor the unbound one's
 
 
+def test_one_and_no_free_inputs(compiled: CompiledFunction) -> None:
+    """The generated call for every arity: one free input left, and none."""
+    x, b = np.array([0.5, -1.0]), np.array([1.0, 2.0, 3.0])
+    one = compiled.bind(x, 2.0, b)
+    np.testing.assert_allclose(one(A)[0], A @ x * 2.0 + b)
+    none = compiled.bind(A, x, 2.0, b)
+    np.testing.assert_allclose(none()[1], [A[0, 0] + A[1, 1] + 2.0])
+    with pytest.raises(TypeError, match="takes 0 inputs, got 1"):
+        none(A)
+
+
 def test_wrong_number_of_inputs_is_an_error(compiled: CompiledFunction) -> None:
     with pytest.raises(TypeError, match="takes 2 inputs, got 4"):
         compiled.bind(1.0, np.zeros(3))(A, np.zeros(2), 1.0, np.zeros(3))
