@@ -39,7 +39,7 @@ import math
 import operator
 from collections import deque
 from functools import lru_cache
-from typing import Any, Sequence, Union
+from typing import Any, Iterator, Sequence, Union
 
 import casadi as ca
 import numpy as np
@@ -167,15 +167,12 @@ class StateObserver:
         100 Hz tick) is fused in one compiled call.  On an invalid sample the samples before it are
         fused and the error is raised, as the calls one by one would do.
         """
-        i, n = 0, len(samples)
-        while i < n:
-            sample, following = samples[i], samples[i + 1] if i + 1 < n else None
-            if (type(sample) is ImuSample and type(following) is WheelSpeedSample and following.t == sample.t
-                    and self._imu_wheel(sample, following)):
-                i += 2
-            else:
-                self.update(sample)
-                i += 1
+        for item in _paired(samples):
+            if not isinstance(item, tuple):
+                self.update(item)
+            elif not self._imu_wheel(*item):
+                self.update(item[0])
+                self.update(item[1])
 
     def _imu_wheel(self, imu: ImuSample, wheel: WheelSpeedSample) -> bool:
         """Fuse an IMU and a wheel-speed sample of one time in one call; False (nothing fused) if one is invalid
@@ -291,20 +288,31 @@ class StateObserver:
         self._t = max(t0, fix.t_measured)
         self._gps_correct(fix)
         rebuilt: deque = deque(entries[:index])
-        replay = [entry[5] for entry in entries[index:]]
-        i, n, fused = 0, len(replay), self._imu_wheel_fn
-        while i < n:  # the samples were validated on arrival; an IMU and wheel-speed pair is fused again
-            sample, following = replay[i], replay[i + 1] if i + 1 < n else None
-            if (fused is not None and type(sample) is ImuSample and type(following) is WheelSpeedSample
-                    and following.t == sample.t):
-                self._fuse_pair(fused, sample, following, rebuilt)
-                i += 2
-            else:
-                rebuilt.append((self._t, self._x, self._P, self._delta, self._ax, sample))
-                self._apply(sample)
-                i += 1
+        fused = self._imu_wheel_fn
+        # the samples were validated on arrival; an IMU and wheel-speed pair is fused again
+        for item in _paired([entry[5] for entry in entries[index:]]):
+            if isinstance(item, tuple) and fused is not None:
+                self._fuse_pair(fused, *item, rebuilt)
+                continue
+            for one in item if isinstance(item, tuple) else (item,):
+                rebuilt.append((self._t, self._x, self._P, self._delta, self._ax, one))
+                self._apply(one)
         self._history = rebuilt
         self._t = max(self._t, now)
+
+
+def _paired(samples: Sequence[Sample]) -> Iterator[Union[Sample, tuple[ImuSample, WheelSpeedSample]]]:
+    """``samples`` in order, except that an IMU sample directly followed by a wheel-speed sample of the same
+    time comes as one (IMU, wheel-speed) pair: the sensors' usual tick, fused in one compiled call."""
+    i, n = 0, len(samples)
+    while i < n:
+        sample, following = samples[i], samples[i + 1] if i + 1 < n else None
+        if type(sample) is ImuSample and type(following) is WheelSpeedSample and following.t == sample.t:
+            yield sample, following
+            i += 2
+        else:
+            yield sample
+            i += 1
 
 
 @lru_cache(maxsize=None)
