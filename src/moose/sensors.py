@@ -66,9 +66,10 @@ class Sensors:
         due = []
         for i, rate in enumerate(self._rates):
             index = math.floor(t * rate + _TICK_TOLERANCE)
-            due.append(index > last[i])
-            if index > last[i]:
+            fresh = index > last[i]
+            if fresh:
                 last[i] = index
+            due.append(fresh)
         return due
 
     def sample(self, t: float, state: np.ndarray, specific_force: tuple[float, float]) -> list[Sample]:
