@@ -21,6 +21,12 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
+from bench_closed_loop import (  # the same case (this folder is on sys.path when run as a script)
+    DURATION,
+    LEAD_TIME,
+    SCENARIO,
+)
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -45,8 +51,8 @@ def load_revision(rev: str, folder: Path) -> str:
 def case(package: str, planner: str) -> Callable[[], Any]:
     """One run of the benchmark's case (``bench_closed_loop.py``) with ``package``."""
     config = importlib.import_module(f"{package}.config").load_config()
-    scenario = importlib.import_module(f"{package}.scenario").load_scenario("paper_v7_tau1.4")
-    scenario = dataclasses.replace(scenario, lead_time=1.0, duration=9.0)
+    scenario = importlib.import_module(f"{package}.scenario").load_scenario(SCENARIO)
+    scenario = dataclasses.replace(scenario, lead_time=LEAD_TIME, duration=DURATION)
     simulate = importlib.import_module(f"{package}.simulation").simulate
     return lambda: simulate(config, scenario, planner, seed=0)
 

@@ -19,13 +19,16 @@ from moose.config import load_config
 from moose.scenario import load_scenario
 from moose.simulation import simulate
 
+SCENARIO, LEAD_TIME, DURATION = "paper_v7_tau1.4", 1.0, 9.0
+"""The 10 s paper case of the benchmark (also what ``bench_against_revision.py`` runs)."""
+
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=10, help="timed runs per planner (the best is printed)")
     runs = parser.parse_args().runs
     config = load_config()
-    scenario = dataclasses.replace(load_scenario("paper_v7_tau1.4"), lead_time=1.0, duration=9.0)
+    scenario = dataclasses.replace(load_scenario(SCENARIO), lead_time=LEAD_TIME, duration=DURATION)
     simulated = scenario.lead_time + scenario.duration
     print(f"closed loop, {simulated:.0f} s simulated (plant 1 kHz, control 100 Hz, planning 5 Hz), best of {runs} runs")
     print(f"{'planner':>10} {'wall s':>8} {'real-time factor':>17} {'per CPU second':>15}")
