@@ -1,6 +1,10 @@
 """Compiled CasADi functions (`moose.ccompile`): the same values as CasADi's virtual machine, bound inputs."""
 from __future__ import annotations
 
+import shutil
+import warnings
+from pathlib import Path
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -80,3 +84,35 @@ def test_bind_on_casadi_virtual_machine() -> None:
     y, z = bound(A, x)
     np.testing.assert_allclose(np.asarray(y).ravel(), A @ x * 2.0 + 1.0)
     np.testing.assert_allclose(float(z), A[0, 0] + A[1, 1] + 2.0)
+
+
+@pytest.mark.parametrize("damage", ["replaced", "truncated", "no hash"])
+def test_cached_object_is_loaded_only_when_its_hash_matches(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                           damage: str) -> None:
+    """A cached .so that is not the one compiled (another library under its name, a cut copy) is not loaded:
+    it is compiled again, with a warning; one without a recorded hash (built before hashes were kept) silently."""
+    x = ca.SX.sym("x")
+    good, evil = ca.Function("moose_test_tamper", [x], [2 * x]), ca.Function("moose_test_tamper", [x], [-x])
+    for name, fn in (("good", good), ("evil", evil)):  # each built in a cache of its own
+        monkeypatch.setenv("MOOSE_CACHE_DIR", str(tmp_path / name))
+        if compile_function(fn) is None:
+            pytest.skip("no C compiler on this machine")
+    cache = tmp_path / "cache"  # a path this process has never loaded (the loader would reuse a loaded one)
+    shutil.copytree(tmp_path / "good", cache)
+    (target,) = cache.glob("*.so")
+    (evil_so,) = (tmp_path / "evil").glob("*.so")
+    if damage == "replaced":
+        shutil.copyfile(evil_so, target)  # a valid library exporting the same symbol
+    elif damage == "truncated":
+        target.write_bytes(target.read_bytes()[:4096])
+    else:
+        target.with_name(target.name + ".sha256").unlink()
+    monkeypatch.setenv("MOOSE_CACHE_DIR", str(cache))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        compiled = compile_function(good)
+    assert compiled is not None and float(compiled(3.0)[0][0]) == 6.0
+    messages = [str(w.message) for w in caught if issubclass(w.category, RuntimeWarning)]
+    assert len(messages) == (damage != "no hash")
+    assert all("does not match its recorded SHA-256" in m and str(target) in m for m in messages)
+    assert compile_function(good) is not None  # rebuilt: its hash now matches

@@ -4,7 +4,10 @@ A CasADi call from Python costs tens of microseconds of argument conversion,
 more than evaluating the plant itself; the generated C called through ctypes
 with preallocated buffers costs a few.  Shared objects are cached in
 ``$MOOSE_CACHE_DIR`` (default ``~/.cache/moose``) under the hash of their C
-source, written atomically, so concurrent processes share one build.  When no C
+source, written atomically, so concurrent processes share one build.  Next to
+each goes the SHA-256 of the object as it was compiled (``.so.sha256``); a
+cached object is loaded only when its bytes hash to that value, from the very
+file that was hashed, else it is compiled again (:func:`load_cached`).  When no C
 compiler is available the caller falls back to CasADi's virtual machine.
 """
 from __future__ import annotations
@@ -15,6 +18,7 @@ import os
 import shutil
 import subprocess
 import tempfile
+import warnings
 from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
 
@@ -125,19 +129,67 @@ def compile_library(name: str, functions: Sequence[ca.Function], source: str = "
     text = generator.dump() + source
     digest = hashlib.sha256((text + ca.CasadiMeta.version() + " ".join(FLAGS)).encode()).hexdigest()[:16]
     target = cache_dir() / f"{name}_{digest}.so"
-    if not target.exists():
-        target.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
-            c_file = Path(tmp) / "f.c"
-            c_file.write_text(text)
-            built = Path(tmp) / "f.so"
-            try:
-                subprocess.run([compiler, *FLAGS, str(c_file), "-o", str(built), "-lm"],
-                               check=True, capture_output=True, timeout=120)
-            except (OSError, subprocess.SubprocessError):
-                return None
-            os.replace(built, target)
-    return ctypes.CDLL(str(target))
+    library = load_cached(target)
+    if library is not None:
+        return library
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
+        c_file = Path(tmp) / "f.c"
+        c_file.write_text(text)
+        built = Path(tmp) / "f.so"
+        try:
+            subprocess.run([compiler, *FLAGS, str(c_file), "-o", str(built), "-lm"],
+                           check=True, capture_output=True, timeout=120)
+        except (OSError, subprocess.SubprocessError):
+            return None
+        data = built.read_bytes()
+        stamp = Path(tmp) / "f.sha256"
+        stamp.write_text(hashlib.sha256(data).hexdigest() + "\n", encoding="ascii")
+        os.replace(stamp, _stamp(target))  # the hash first: a reader in between finds the old file refused
+        os.replace(built, target)
+    return _load(target, data)
+
+
+def _stamp(target: Path) -> Path:
+    """Where the SHA-256 of the shared object ``target`` is kept."""
+    return target.with_name(target.name + ".sha256")
+
+
+_LOADED: dict[Path, ctypes.CDLL] = {}
+"""The shared objects this process has loaded (each verified once), by cache path."""
+
+
+def load_cached(target: Path) -> Optional[ctypes.CDLL]:
+    """The shared object ``target`` loaded, if its bytes hash to the SHA-256 kept next to it; else ``None``.
+
+    The bytes that were hashed are the bytes that are loaded: they are copied into a private folder of the
+    cache (created for this load, readable by this user only) and loaded from there, so a file swapped in
+    after the check cannot be loaded.  A file whose hash differs from the recorded one (damaged or replaced) is
+    reported with a :class:`RuntimeWarning`; a file without a recorded hash (none yet, or built before hashes
+    were kept) is not.  Either way the caller compiles it again.  A process loads each cache path once."""
+    if target in _LOADED:
+        return _LOADED[target]
+    try:
+        expected = _stamp(target).read_text(encoding="ascii").strip()
+        data = target.read_bytes()
+    except (OSError, UnicodeDecodeError):
+        return None
+    actual = hashlib.sha256(data).hexdigest()
+    if actual != expected:
+        warnings.warn(f"cached compiled code {str(target)!r} does not match its recorded SHA-256 "
+                      f"({actual[:16]}... instead of {expected[:16]}...): it is compiled again", RuntimeWarning,
+                      stacklevel=2)
+        return None
+    return _load(target, data)
+
+
+def _load(target: Path, data: bytes) -> ctypes.CDLL:
+    """``data`` (the verified bytes of ``target``) loaded from a private copy."""
+    with tempfile.TemporaryDirectory(dir=target.parent) as private:  # mode 0700; a loaded object may be unlinked
+        copy = Path(private) / target.name
+        copy.write_bytes(data)
+        library = _LOADED[target] = ctypes.CDLL(str(copy))
+    return library
 
 
 def compile_function(fn: ca.Function) -> Optional[CompiledFunction]:
