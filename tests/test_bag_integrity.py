@@ -312,3 +312,15 @@ def test_run_parameters_naming_an_unknown_planner_are_refused(tmp_path: Path) ->
     out = run("bag", "replan", str(bag))
     assert out.returncode == 2 and "moose: error:" in out.stderr and "moose.planner = 'bogus'" in out.stderr
     assert "Traceback" not in out.stderr
+
+
+@pytest.mark.parametrize("section", ["/*", "observer"])
+def test_replan_refuses_a_parameter_file_section_it_would_ignore(tmp_path: Path, section: str) -> None:
+    """The probe's ``moose bag replan --params`` with a file whose only section is ``/*``: the file's name was
+    printed and the defaults used."""
+    params = tmp_path / "params.yaml"
+    params.write_text(f'"{section}":\n  ros__parameters:\n    vehicle: {{m: -5.0}}\n')
+    out = run("bag", "replan", str(EXTREME), "--params", str(params))
+    assert out.returncode == 2 and "Traceback" not in out.stderr, out.stderr
+    assert f"moose: error: parameter file {str(params)!r}: section {section!r} is not applied by moose bag replan" \
+        in out.stderr

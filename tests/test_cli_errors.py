@@ -183,3 +183,17 @@ def test_a_closed_pipe_is_not_a_traceback() -> None:
     proc.stdout.close()
     _, err = proc.communicate(timeout=120)
     assert b"Traceback" not in err and b"Exception ignored" not in err and proc.returncode == 128 + signal.SIGPIPE
+
+
+@pytest.mark.parametrize("section", ["/*", "observer", "/observer"])
+@pytest.mark.parametrize("command", [["simulate", *SHORT], ["reproduce"],
+                                     ["sweep", "--speed", "5", "-o", "{tmp}/sweep"]])
+def test_a_parameter_file_section_that_the_command_would_ignore_is_refused(tmp_path: Path, section: str,
+                                                                          command: list[str]) -> None:
+    """The probe ran ``moose simulate --config`` with a file whose only section is ``/*`` (or ``observer:``)
+    holding ``vehicle: {m: -5}``: CLEAR, rc 0, the file ignored.  The core applies only ``/**``."""
+    path = tmp_path / "sections.yaml"
+    path.write_text(f'"{section}":\n  ros__parameters:\n    vehicle: {{m: -5.0}}\n')
+    args = [a.format(tmp=tmp_path) for a in command[1:]]
+    refused(moose(command[0], "--config", str(path), *args), f"section {section!r} is not applied by "
+            f"moose {command[0]}, which reads only '/**'")

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import io
+import re
 import subprocess
 import sys
 import time
@@ -63,6 +64,15 @@ def test_a_section_for_no_node_of_the_graph_is_an_error(tmp_path: Path) -> None:
     assert result.returncode == 2 and "names no node of the graph" in result.stderr
     path.write_text("/observer:\n  ros__parameters:\n    observer: {}\n/**:\n  ros__parameters: {}\n")
     check_parameter_file(path)
+
+
+@pytest.mark.parametrize(("section", "graph"), [("/*", "full"), ("can_bridge", "full"), ("vehicle_simulator", "car")])
+def test_a_section_the_launched_graph_would_ignore_is_an_error(tmp_path: Path, section: str, graph: str) -> None:
+    """A wildcard other than ``/**``, or a node that the launched graph does not run, names no node of it."""
+    path = tmp_path / "sections.yaml"
+    path.write_text(f'"{section}":\n  ros__parameters:\n    vehicle: {{m: -5.0}}\n')
+    with pytest.raises(ParamError, match=f"section '{re.escape(section)}' names no node of the graph '{graph}'"):
+        node_overrides(graph, "combined", {}, str(path))
 
 
 def test_the_launcher_refuses_a_bad_configuration_before_any_node_starts(tmp_path: Path) -> None:

@@ -19,11 +19,16 @@ def config_from_mapping(params: Mapping[str, Any], where: str = "parameters") ->
     return build(Config, params, where)
 
 
-def load_config(path: str | Path | None = None, node: str | None = None) -> Config:
-    """Read ``path`` (default: the shipped ``config/moose.yaml``, :data:`moose.resources.PARAMETER_FILE`)."""
+def load_config(path: str | Path | None = None, reader: str | None = "this command") -> Config:
+    """Read the ``/**`` section of ``path`` (default: the shipped ``config/moose.yaml``,
+    :data:`moose.resources.PARAMETER_FILE`).
+
+    ``reader`` names the command that reads it (``moose simulate``): it applies only ``/**``, so any
+    other section is a :class:`ParamError` naming it.  ``None``: other sections are left to their
+    readers (the node graph, whose launcher checks them against its nodes)."""
     if path is None:
         path = PARAMETER_FILE
-    return config_from_mapping(read_ros_params(path, node), where=str(Path(path).name))
+    return config_from_mapping(read_ros_params(path, reader=reader), where=str(Path(path).name))
 
 
 def config_as_ros_params(config: Config) -> dict[str, Any]:

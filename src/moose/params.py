@@ -270,12 +270,18 @@ def to_mapping(obj: Any) -> dict[str, Any]:
     return plain(obj)
 
 
-def read_ros_params(path: str | Path, node: str | None = None) -> dict[str, Any]:
+WILDCARD = "/**"
+"""The section of a ROS 2 parameter file that applies to every node, and the only one the core reads."""
+
+
+def read_ros_params(path: str | Path, node: str | None = None, *, reader: str | None = None) -> dict[str, Any]:
     """Read a ROS 2 parameter file and return the merged ``ros__parameters`` for ``node``.
 
     The ``/**`` wildcard section applies to every node; a section named after
     ``node`` (with or without a leading ``/``) overrides it key by key.  With
-    ``node=None`` only the wildcard section is returned.
+    ``node=None`` only the wildcard section is returned.  ``reader`` names a command that applies
+    only the wildcard section (``moose simulate``): any other section of the file is then a
+    :class:`ParamError` naming it, instead of being ignored.
     """
     path = Path(path)
     try:
@@ -288,8 +294,14 @@ def read_ros_params(path: str | Path, node: str | None = None) -> dict[str, Any]
         raise ParamError(f"parameter file {str(path)!r} is not valid YAML: {exc}") from None
     if not isinstance(document, Mapping):
         raise ParamError(f"parameter file {str(path)!r}: expected a mapping of node names, got {document!r}")
+    if reader is not None:
+        for section in document:
+            if section != WILDCARD:
+                raise ParamError(f"parameter file {str(path)!r}: section {section!r} is not applied by {reader}, "
+                                 f"which reads only {WILDCARD!r} (sections named after nodes apply to the node graph: "
+                                 "moose launch, moose node)")
     merged: dict[str, Any] = {}
-    sections = ["/**"] + ([node.lstrip("/"), "/" + node.lstrip("/")] if node else [])
+    sections = [WILDCARD] + ([node.lstrip("/"), "/" + node.lstrip("/")] if node else [])
     for section in sections:
         body = document.get(section)
         if body is None:

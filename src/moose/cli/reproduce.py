@@ -52,7 +52,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
                              f"({', '.join(GENERATED)})")
     if args.json is not None and not Path(args.json).parent.is_dir():
         raise ParamError(f"--json = {args.json!r} is invalid: no folder {str(Path(args.json).parent)!r}")
-    config = load_config(args.config)
+    config = load_config(args.config, "moose reproduce")
     runs = run_all(config, seed=args.seed, progress=lambda what: print(f"  {what}", file=sys.stderr, flush=True))
     found = claims(runs, config.mpc.solver, config.vehicle.delta_max)
     print(render_claims(found))

@@ -104,7 +104,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
     record = bag_recorder(args)
     scenario = scenario_from_args(args)
-    config = load_config(args.config)
+    config = load_config(args.config, "moose simulate")
     if args.set:
         config = with_overrides(config, parse_settings(args.set))
     config = configure(config, args)

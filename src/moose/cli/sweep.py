@@ -122,7 +122,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from ..sweep.store import RunFolder, pyarrow_or_error
 
     pyarrow_or_error()
-    spec = SweepSpec(tuple(_axes(args)), load_config(args.config), samples=args.samples,
+    spec = SweepSpec(tuple(_axes(args)), load_config(args.config, "moose sweep"), samples=args.samples,
                      sampling=args.sampling, sampling_seed=args.sampling_seed)
     if args.mu is not None and ":" in args.mu and args.mu.count(":") == 1:
         print("moose: warning: a sampled --mu builds a maneuver table (about 0.4 s) for every distinct mu, in this "

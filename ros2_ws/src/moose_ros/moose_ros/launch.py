@@ -172,6 +172,8 @@ def node_overrides(graph: str, planner: str, params: Optional[dict[str, Any]] = 
     would refuse (the file's values included), so a bad configuration stops the launch before a node runs.
     The planner node that ``planner`` does not use is left out.
     """
+    if params_file:
+        check_parameter_file(params_file, GRAPHS[graph], graph)
     nodes = [n for n in GRAPHS[graph] if not (planner == "mpc" and n == "msf_planner")
              and not (planner == "msf" and n == "mpc_planner")]
     given = dict(params or {}, **{"simulation.planner": planner})
@@ -264,7 +266,7 @@ def launch(
     runtimes = {name: env["MOOSE_RUNTIME"] for name, (_python, env) in children.items()}
     # the monitor: on the nodes' runtime when this interpreter can run it, else (and for a mixed graph) on Cyclone
     runtimes[MONITOR_NAME] = "rclpy" if set(runtimes.values()) == {"rclpy"} and not rclpy_missing() else "dds"
-    monitor = Monitor(scenario, scenario.configure(load_config(params_file)))
+    monitor = Monitor(scenario, scenario.configure(load_config(params_file, reader=None)))
     node = create_node(MONITOR_NAME, overrides={"use_sim_time": False}, runtime=runtimes[MONITOR_NAME])
     recorder = live = None
     try:

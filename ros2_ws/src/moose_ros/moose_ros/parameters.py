@@ -17,9 +17,9 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Any, Literal, Mapping, Optional
+from typing import Any, Collection, Literal, Mapping, Optional
 
-from moose.params import ParamError, build, check, non_negative, positive
+from moose.params import WILDCARD, ParamError, build, check, non_negative, positive
 
 from .graph import COMMAND_TIMEOUT, NODES
 
@@ -177,9 +177,11 @@ def node_parameters(node: str, params: Mapping[str, Any]) -> tuple[Any, Any]:
     return config, build(NODE_PARAMETERS[node], {k: v for k, v in params.items() if k in own}, where=node)
 
 
-def check_parameter_file(path: str | Path) -> None:
-    """Refuse a ROS 2 parameter file with a section named after no node of the graph (a misspelt node name
-    would otherwise be ignored, its values never checked)."""
+def check_parameter_file(path: str | Path, nodes: Collection[str] = tuple(NODES), graph: str = "") -> None:
+    """Refuse a ROS 2 parameter file with a section other than ``/**`` that names none of ``nodes`` (default:
+    every node of any graph; ``graph``: the name of the graph they make, for the message) — a misspelt node name,
+    a wildcard such as ``/*``, or a node the graph does not run would otherwise be ignored, its values never
+    checked."""
     import yaml
 
     try:
@@ -189,6 +191,7 @@ def check_parameter_file(path: str | Path) -> None:
     if not isinstance(document, Mapping):
         return
     for section in document:
-        if section != "/**" and str(section).lstrip("/") not in NODES:
-            raise ParamError(f"parameter file {str(path)!r}: section {section!r} names no node of the graph; "
-                             f"sections: '/**' and {', '.join(NODES)}")
+        if section != WILDCARD and str(section).lstrip("/") not in nodes:
+            where = f"the graph {graph!r}" if graph else "the graph"
+            raise ParamError(f"parameter file {str(path)!r}: section {section!r} names no node of {where}; "
+                             f"sections: {WILDCARD!r} and {', '.join(nodes)}")

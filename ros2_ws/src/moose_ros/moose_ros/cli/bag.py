@@ -73,7 +73,7 @@ def cmd_bag(args: argparse.Namespace) -> int:
             from moose.config import load_config
 
             plot = check_output_file("--plot", args.plot, plot_suffixes()) if args.plot is not None else None
-            config = load_config(args.params) if args.params else None
+            config = load_config(args.params, "moose bag replan") if args.params else None
             result = bag.replan(args.path, config, args.planner, args.v_des, report)
             summary = result["summary"]
             print({"given": f"parameters      {args.params}",
