@@ -186,7 +186,8 @@ def test_smoothness_of_a_known_steering_signal() -> None:
 
 SUMMARY_KEYS = {
     "scenario", "planner", "seed", "outcome", "reason", "collided", "lost_control", "left_field", "complete",
-    "passed_obstacle", "min_clearance_m", "max_abs_sideslip_rad", "max_abs_heading_rad", "mu", "mu_planning",
+    "passed_obstacle", "min_clearance_m", "max_abs_sideslip_rad", "max_abs_heading_rad", "verdict_limits",
+    "verdict_limits_default", "mu", "mu_planning",
     "tau_scenario_s", "tau_s", "nu", "w_m", "v_detect_mps", "paper_nu", "max_abs_steer_rad", "x_peak_steer_m",
     "max_lateral_offset_m", "final_lateral_offset_m", "min_speed_mps", "max_speed_mps", "mpc_solve_ms",
     "mpc_status_counts", "mean_weight_mpc", "duration_s", "steer_total_variation_rad", "time_at_steer_limit_s",

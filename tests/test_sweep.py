@@ -392,6 +392,23 @@ def test_results_and_maps_agree_with_the_journal(tmp_path: Path) -> None:
     assert main(["sweep", "plot", str(out), "--x", "speed"]) == 2  # speed does not vary here
 
 
+def test_rows_record_their_verdict_limits_and_maps_show_only_the_default_verdict(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A sweep with a looser ``sideslip_max`` could call lost control a pass without a trace: each row records
+    the limits it was judged with, and ``sweep plot`` refuses rows judged with others."""
+    out = tmp_path / "s"
+    assert main(["sweep", "--speed", "7", "--tau", "1.4", "--nu", "0.9", "--mu", "paper", "--planner", "mpc",
+                 "--duration", "2", "--set", "verdict.sideslip_max=10", "-o", str(out), "--workers", "1",
+                 "--quiet"]) == 0
+    (row,) = rows_of(out)
+    assert row["verdict_limits_default"] is False and json.loads(row["verdict_limits"])["sideslip_max"] == 10.0
+    capsys.readouterr()
+    assert main(["sweep", "plot", str(out), "--plot-output", str(tmp_path / "maps")]) == 2
+    error = capsys.readouterr().err
+    assert "1 cases were judged with other verdict limits (sideslip_max = 10 instead of 0.35)" in error
+    assert not (tmp_path / "maps" / "index.html").exists()
+
+
 def test_the_core_stays_light_and_a_missing_extra_is_named(tmp_path: Path) -> None:
     """``moose`` loads no sweep dependency until a sweep runs; without pyarrow the sweep says what to install."""
     code = ("import sys; from moose.cli import build_parser; build_parser(); "

@@ -125,6 +125,52 @@ def test_summary_json_is_strict_json() -> None:
         assert back["notes"]["nu"]
 
 
+def test_a_run_judged_with_other_limits_says_so(tmp_path, capsys) -> None:
+    """The probe: ``moose simulate --planner mpc --set verdict.sideslip_max=10`` printed "CLEAR … in control",
+    rc 0, where the default verdict is LOST_CONTROL (|β| 0.39 rad), and the summary did not say that its limits
+    were changed.  The summary records them; the printed verdict names the changed one."""
+    from moose.cli import main
+
+    paths = {}
+    for label, extra in (("default", []), ("loose", ["--set", "verdict.sideslip_max=10"])):
+        paths[label] = tmp_path / f"{label}.json"
+        main(["simulate", "--planner", "mpc", "--no-bag", "--json", str(paths[label]), *extra])
+        printed = capsys.readouterr().out
+        outcome = next(line for line in printed.splitlines() if line.startswith("outcome"))
+        if label == "loose":
+            assert "under NON-DEFAULT verdict limits (sideslip_max = 10 instead of 0.35)" in outcome, outcome
+        else:
+            assert "NON-DEFAULT" not in outcome, outcome
+    default, loose = (json.loads(paths[k].read_text()) for k in ("default", "loose"))
+    assert default["verdict_limits_default"] is True and loose["verdict_limits_default"] is False
+    assert default["verdict_limits"] == {"sideslip_max": 0.35, "sideslip_speed_min": 2.0, "heading_max": math.pi / 2,
+                                         "max_gap": 0.2}
+    assert loose["verdict_limits"] == {**default["verdict_limits"], "sideslip_max": 10.0}
+    assert default["outcome"] == "lost_control" and loose["outcome"] == "clear"  # the same run, judged twice
+
+
+def test_the_claims_table_is_judged_with_the_default_limits(tmp_path) -> None:
+    """``moose reproduce`` refuses a configuration with other verdict limits before any run."""
+    import subprocess
+    import sys
+
+    from moose.config import load_config, with_overrides
+    from moose.params import ParamError
+    from moose.reproduce import run_all
+
+    config = with_overrides(load_config(), {"verdict.heading_max": 3.0})
+    with pytest.raises(ParamError, match="heading_max = 3 instead of 1.5708: the paper's claims are judged with the "
+                                         "default verdict limits"):
+        run_all(config, scenarios=["paper_v7_tau1.4"])
+    path = tmp_path / "loose.yaml"
+    path.write_text("/**:\n  ros__parameters:\n    verdict: {sideslip_max: 10.0}\n")
+    out = subprocess.run([sys.executable, "-m", "moose.cli", "reproduce", "--config", str(path)], capture_output=True,
+                         text=True, timeout=120)
+    assert out.returncode == 2 and "moose: error: verdict: sideslip_max = 10 instead of 0.35" in out.stderr, out.stderr
+    runs = run_all(load_config(), scenarios=["paper_v5_tau3"])
+    assert runs and all(r.summary["verdict_limits_default"] for r in runs)
+
+
 # -- boundaries, reasons and flags: each threshold is inclusive on the documented side
 
 DEFAULT_PARAMS = VerdictParams()

@@ -13,7 +13,7 @@ from typing import Any, Optional
 import numpy as np
 
 from .simulation import SimulationResult
-from .verdict import finite_or_none, judge
+from .verdict import DEFAULT_PARAMS, finite_or_none, judge, limits_of
 
 
 def smoothness(t: np.ndarray, delta: np.ndarray, delta_max: float, t_from: float) -> dict[str, Optional[float]]:
@@ -61,6 +61,8 @@ def summarize(result: SimulationResult) -> dict[str, Any]:
         "min_clearance_m": verdict.min_clearance_m,
         "max_abs_sideslip_rad": verdict.max_abs_sideslip_rad,
         "max_abs_heading_rad": verdict.max_abs_heading_rad,
+        "verdict_limits": limits_of(config.verdict),
+        "verdict_limits_default": config.verdict == DEFAULT_PARAMS,
         "mu": config.vehicle.mu,
         "mu_planning": config.mu_planning,
         "tau_scenario_s": scenario.tau,

@@ -17,9 +17,11 @@ from typing import Any, Callable, Iterable, Literal, Optional, Sequence, Union
 
 from .metrics import summarize
 from .paper import PAPER_FRICTION
+from .params import ParamError
 from .scenario import load_scenario
 from .schema import Config, PlannerMode, SolverName
 from .simulation import simulate
+from .verdict import changed_limits, limits_of
 
 NINE = ("paper_v5_tau5", "paper_v5_tau4", "paper_v5_tau3", "paper_v6_w2.0", "paper_v6_w2.4", "paper_v6_w3.2",
         "paper_v7_tau2.8", "paper_v7_tau2", "paper_v7_tau1.4")
@@ -69,7 +71,13 @@ class Claim:
 
 def run_all(config: Config, scenarios: Sequence[str] = NINE + COMPARISON, seed: int = 0,
             progress: Optional[Callable[[str], None]] = None) -> list[Run]:
-    """Every scenario with every planner of :data:`RUNS` at the scenario's friction (the calibrated one)."""
+    """Every scenario with every planner of :data:`RUNS` at the scenario's friction (the calibrated one).
+
+    The claims are judged with the default verdict limits: a configuration with others is a
+    :class:`~moose.params.ParamError` naming them, before any run."""
+    changed = changed_limits(limits_of(config.verdict))
+    if changed:
+        raise ParamError(f"verdict: {changed}: the paper's claims are judged with the default verdict limits")
     runs = []
     for name in scenarios:
         scenario = dataclasses.replace(load_scenario(name), duration=DURATION)

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Literal, Optional
+from typing import Literal, Mapping, Optional
 
 import numpy as np
 
@@ -149,6 +149,19 @@ def judge(t: np.ndarray, x: np.ndarray, y: np.ndarray, theta: np.ndarray, vx: np
         reason = f"passed with {min_clearance:.2f} m clearance, in control, inside the field"
     return Verdict(outcome, hit, bool(spun or turned), bool(np.any(outside)), complete, passed, min_clearance,
                    max_beta, max_heading, reason)
+
+
+def limits_of(params: VerdictParams) -> dict[str, float]:
+    """The verdict limits of ``params`` by name (the summary's ``verdict_limits``)."""
+    return {f.name: float(getattr(params, f.name)) for f in dataclasses.fields(params)}
+
+
+def changed_limits(limits: Mapping[str, float]) -> str:
+    """``""`` when ``limits`` (:func:`limits_of`) are the defaults, else which differ: ``"sideslip_max = 10 instead
+    of 0.35"``.  A run judged with other limits can pass where the default verdict fails it."""
+    default = limits_of(DEFAULT_PARAMS)
+    return ", ".join(f"{name} = {value:g} instead of {default[name]:g}" for name, value in limits.items()
+                     if value != default.get(name))
 
 
 def finite_or_none(value: Optional[float]) -> Optional[float]:

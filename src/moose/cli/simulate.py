@@ -44,10 +44,14 @@ def add_subparser(subparsers: Any) -> None:
 
 def format_summary(summary: dict[str, Any]) -> str:
     """Human-readable lines of a run summary."""
+    from ..verdict import changed_limits
+
     solve = summary["mpc_solve_ms"]
+    changed = changed_limits(summary["verdict_limits"])
+    judged = f" under NON-DEFAULT verdict limits ({changed})" if changed else ""
     lines = [
         f"scenario        {summary['scenario']}  (planner {summary['planner']}, seed {summary['seed']})",
-        f"outcome         {summary['outcome'].upper()}: {summary['reason']}",
+        f"outcome         {summary['outcome'].upper()}{judged}: {summary['reason']}",
         f"threat          tau = {_fmt(summary['tau_s'])} s, nu = {_fmt(summary['nu'])}"
         f" (paper {_fmt(summary['paper_nu'])}), w = {_fmt(summary['w_m'])} m",
         f"min clearance   {_fmt(summary['min_clearance_m'], '.2f')} m",

@@ -422,6 +422,7 @@ def draw_maps(folder: Path, out: Path, x: Optional[str] = None, y: Optional[str]
     if not rows:
         raise ParamError(f"{str(folder)!r} holds no finished cases to map")
     manifest = RunFolder(folder).manifest() if folder.is_dir() else None
+    check_default_limits(rows, manifest, str(folder))
     x, y = choose_axes(rows, x, y)
     cells = Cells(rows, x, y)
     out.mkdir(parents=True, exist_ok=True)
@@ -438,6 +439,30 @@ def draw_maps(folder: Path, out: Path, x: Optional[str] = None, y: Optional[str]
         figures.append(("Outcome", outcome_map(cells, facets, out / f"outcome{suffix}.png")))
         figures.append(("Minimum clearance", clearance_map(cells, facets, out / f"clearance{suffix}.png")))
     return write_report(out / "index.html", rows, cells, figures, points, manifest)
+
+
+def check_default_limits(rows: Sequence[dict[str, Any]], manifest: Optional[dict[str, Any]], where: str) -> None:
+    """Refuse rows that were not judged with the default verdict limits: a map, like the claims table, shows the
+    default verdict (a lost control judged a pass under a looser ``sideslip_max`` would colour a cell safe).
+
+    Each row records its limits (``verdict_limits_default``); rows recorded before it did are judged by the
+    sweep's configuration in the manifest and its axes (no ``verdict.*`` axis)."""
+    from ..verdict import changed_limits
+
+    done = [row for row in rows if row.get("status") == "done"]
+    other = [row for row in done if row.get("verdict_limits_default") is False]
+    if other:
+        raise ParamError(f"{where!r}: {len(other)} cases were judged with other verdict limits "
+                         f"({changed_limits(json.loads(other[0]['verdict_limits']))}); maps show the default verdict: "
+                         "sweep again without changing the verdict group")
+    if all(row.get("verdict_limits_default") is not None for row in done):
+        return
+    spec = (manifest or {}).get("spec", {})
+    verdict = spec.get("config", {}).get("/**", {}).get("ros__parameters", {}).get("verdict")
+    varied = [axis for axis in spec.get("axes", {}) if axis.startswith("verdict.")]
+    if verdict is None or varied or changed_limits(verdict):
+        raise ParamError(f"{where!r}: its rows do not record their verdict limits, and its manifest does not show the "
+                         "default ones; maps show the default verdict: sweep again")
 
 
 def outcome_table(rows: Sequence[dict[str, Any]]) -> list[tuple[float, str, dict[str, int], int]]:
