@@ -40,9 +40,9 @@ import numpy as np
 from scipy.optimize import minimize
 
 from moose.config import load_config
-from moose.mpc import MpcPlanner, kinematic_rollout
 from moose.paper import PAPER_FRICTION
 from moose.params import replace
+from moose.planner.mpc import MpcPlanner, kinematic_rollout
 from moose.schema import MpcParams, PlanningGrid, SolverCaps
 from moose.signals import Obstacle, PlannerInput, StateEstimate, Threat
 

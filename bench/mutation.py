@@ -1,7 +1,7 @@
 """Mutation score of the safety- and verdict-critical modules (mutmut), per module.
 
     python bench/mutation.py                    # every module of MODULES (about 12 min on 2 cores)
-    python bench/mutation.py canbus.codec fbl   # some of them
+    python bench/mutation.py canbus.codec planner.fbl   # some of them
     python bench/mutation.py --table            # only print the table from the stored results
     python bench/mutation.py --docs             # ... and write it into docs/design.md
 
@@ -65,8 +65,8 @@ MODULES: dict[str, list[str]] = {
     "canbus.bridge": ["test_can_bridge_core.py", "test_can_bridge.py", "test_can.py", "test_can_dbc.py",
                       "test_conventions.py"],
     "canbus.ecu": ["test_can_ecu.py", "test_can.py", "test_can_plant.py", "test_can_bridge.py", "test_conventions.py"],
-    "weight": ["test_weight.py"],
-    "fbl": ["test_fbl.py", "test_weight.py"],
+    "planner.weight": ["test_weight.py"],
+    "planner.fbl": ["test_fbl.py", "test_weight.py"],
 }
 """Module (under src/moose) → the test files (under tests/) run against its mutants."""
 
@@ -132,7 +132,7 @@ def mutant_diff(workdir: Path, name: str, env: dict[str, str]) -> list[str]:
 
 
 def function_of(name: str) -> str:
-    """``moose.fbl.xǁFeedbackLinearizationǁreference__mutmut_3`` → ``FeedbackLinearization.reference``."""
+    """``moose.planner.fbl.xǁFeedbackLinearizationǁreference__mutmut_3`` → ``FeedbackLinearization.reference``."""
     tail = name.rsplit("__mutmut_", 1)[0]
     if "ǁ" in tail:
         parts = [p for p in tail.split("ǁ")[1:] if p]

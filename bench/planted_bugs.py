@@ -58,7 +58,7 @@ BUGS = (
         (("        out = self.guard.output(t)\n",
           "        out = self.guard.output(t)\n        out = self.guard._latest or out\n"),),
         ("tests/test_simulator_node.py",)),
-    Bug("barrier-sign", "barrier sign flipped in the MPC cost", "src/moose/mpc/cost.py",
+    Bug("barrier-sign", "barrier sign flipped in the MPC cost", "src/moose/planner/mpc/cost.py",
         (("    d = y_tilde - ysafe\n", "    d = ysafe - y_tilde\n"),),
         ("tests/test_mpc.py",)),
     Bug("crc-dropped", "CRC check dropped in the CAN codec", "src/moose/canbus/codec.py",

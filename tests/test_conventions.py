@@ -15,9 +15,9 @@ from can_lockstep import Feedback, drive_over_can
 from moose.canbus.codec import load_database
 from moose.canbus.ecu import VehicleEcu
 from moose.canbus.safety import Command, GuardParams
-from moose.fbl import FeedbackLinearization
 from moose.motion import MotionController
 from moose.params import VehicleParams
+from moose.planner.fbl import FeedbackLinearization
 from moose.schema import FblParams, MotionParams, SensorParams
 from moose.signals import EpsSample, ImuSample, Reference, StateEstimate, WheelSpeedSample
 from moose.vehicle import DELTA, GAMMA, THETA, VX, Y

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from moose.fbl import FeedbackLinearization
 from moose.params import VehicleParams
+from moose.planner.fbl import FeedbackLinearization
 from moose.schema import FblParams
 from moose.signals import StateEstimate
 from moose.tire import peak_slip

@@ -157,7 +157,7 @@ def test_can_defaults_have_one_definition() -> None:
 
 
 LEAN = ("motion_controller", "can_bridge", "weight_fbl")
-HEAVY = ("casadi", "moose.mpc", "moose.msf", "moose.maneuver", "scipy")
+HEAVY = ("casadi", "moose.planner.mpc", "moose.planner.msf", "moose.maneuver", "scipy")
 
 
 def _loaded_after(code: str) -> list[str]:

@@ -1,7 +1,7 @@
 """The node graph reproduces the lockstep loop's planning steps.
 
 The ``weight_fbl`` node combines the plans with the core's planning step, the code the lockstep loop
-runs (``moose.planning.PlanningStep``), and the planner nodes keep its schedule (every t_s, restarted
+runs (``moose.planner.step.PlanningStep``), and the planner nodes keep its schedule (every t_s, restarted
 at a new obstacle).  One run of the graph on a relaxed case is recorded; its bag is read back (an
 independent reader of what the nodes published) and compared with the lockstep run of the same
 scenario, aligned at the detection: the graph detects

@@ -18,7 +18,7 @@ import pytest
 
 from moose.config import load_config
 from moose.metrics import smoothness, summarize
-from moose.planning import PlanningRecord
+from moose.planner.step import PlanningRecord
 from moose.scenario import adhoc_scenario
 from moose.signals import Blend, Obstacle, PlanResult, Reference, Threat
 from moose.simulation import SimulationResult, simulate

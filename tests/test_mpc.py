@@ -10,7 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from moose.mpc import (
+from moose.params import G, ParamError
+from moose.planner.mpc import (
     MpcPlanner,
     epsilon,
     j_brake,
@@ -21,8 +22,7 @@ from moose.mpc import (
     past_obstacle,
     y_safe,
 )
-from moose.params import G, ParamError
-from moose.projected_newton import CompilerMissing
+from moose.planner.mpc.projected_newton import CompilerMissing
 from moose.schema import PAPER_CAPS, MpcParams, PlanningGrid, SolverCaps
 from moose.signals import Obstacle, PlannerInput, StateEstimate, Threat
 

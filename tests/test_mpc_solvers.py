@@ -1,4 +1,4 @@
-"""The MPC's solvers behind one interface (moose.mpc.solver): registry, and the same contract for each."""
+"""The MPC's solvers behind one interface (moose.planner.mpc.solver): registry, and the same contract for each."""
 from __future__ import annotations
 
 import math
@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from moose.mpc import MpcPlanner, Solver, SolveResult, build_problem, create, register, registered
+from moose.planner.mpc import MpcPlanner, Solver, SolveResult, build_problem, create, register, registered
 from moose.schema import SOLVERS, MpcParams, PlanningGrid
 from moose.signals import Obstacle, PlannerInput, StateEstimate, Threat
 

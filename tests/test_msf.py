@@ -8,9 +8,9 @@ import pytest
 
 from moose.detector import ObstacleDetector
 from moose.maneuver import MaxSteeringTable
-from moose.msf import MsfPlanner, zoh_rollout
 from moose.paper import PAPER_FRICTION
 from moose.params import ParamError, VehicleParams
+from moose.planner.msf import MsfPlanner, zoh_rollout
 from moose.schema import Config, DetectorParams, ManeuverParams, MsfParams
 from moose.signals import Obstacle, PlannerInput, StateEstimate
 

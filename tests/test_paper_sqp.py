@@ -1,4 +1,4 @@
-"""The paper's baseline solver (moose.mpc.paper_sqp): fmincon's SQP algorithm under Table II.
+"""The paper's baseline solver (moose.planner.mpc.paper_sqp): fmincon's SQP algorithm under Table II.
 
 Every cost evaluation is counted here from outside the solver, by wrapping the cost it is given.
 """
@@ -12,10 +12,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from moose.mpc import MpcPlanner
-from moose.mpc.paper_sqp import FD_STEP, SqpOptions, box_qp, fmincon_sqp, sqp_options
 from moose.paper import PAPER_FRICTION
 from moose.params import VehicleParams, replace
+from moose.planner.mpc import MpcPlanner
+from moose.planner.mpc.paper_sqp import FD_STEP, SqpOptions, box_qp, fmincon_sqp, sqp_options
 from moose.schema import MpcParams, PlanningGrid, SolverCaps
 from moose.signals import Obstacle, PlannerInput, StateEstimate, Threat
 

@@ -1,4 +1,4 @@
-"""Projected Newton solver (moose.projected_newton): box-constrained optima against references,
+"""Projected Newton solver (moose.planner.mpc.projected_newton): box-constrained optima against references,
 negative curvature, caps, statuses, bounds, bad input."""
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from moose.params import ParamError
-from moose.projected_newton import NewtonOptions, ProjectedNewton
+from moose.planner.mpc.projected_newton import NewtonOptions, ProjectedNewton
 
 GENEROUS = NewtonOptions(max_iter=100, max_evals=5000, tol_opt=1e-6, tol_step=1e-12)
 

@@ -167,7 +167,7 @@ STOCK_ORDER = textwrap.dedent(r'''
 BYTES_AND_ENDPOINTS = textwrap.dedent(r'''
     import json, sys
     import numpy as np
-    from moose.planning import PlanResult
+    from moose.signals import PlanResult
     from moose_ros import convert as cv
     from moose_ros.nodes import node_class
     from moose_ros.runtime import DdsNode, RclpyNode, create_node

@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from moose.planning import blend_path, zoh_rollout
+from moose.planner.step import blend_path, zoh_rollout
 from moose.signals import Blend, Obstacle, PlanResult, StateEstimate, Threat
 from moose_ros import convert as cv
 from moose_ros.graph import FRAME_BASE, FRAME_ODOM, FRAME_TRUTH, SENSOR_MOUNTS

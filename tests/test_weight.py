@@ -6,13 +6,13 @@ import math
 import numpy as np
 import pytest
 
-from moose.fbl import FeedbackLinearization
-from moose.msf import zoh_rollout
 from moose.params import ParamError, VehicleParams
+from moose.planner.fbl import FeedbackLinearization
+from moose.planner.msf import zoh_rollout
+from moose.planner.weight import WeightFunction
 from moose.schema import FblParams, WeightParams
 from moose.signals import Blend, Obstacle, PlanResult, StateEstimate, Threat
 from moose.tire import peak_slip
-from moose.weight import WeightFunction
 
 VEHICLE = VehicleParams()
 EST = StateEstimate(0.0, 0.0, 0.0, 0.0, 7.0, 0.0, 0.0, 0.0)

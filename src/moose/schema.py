@@ -72,7 +72,7 @@ class PlanningGrid:
     """The planning μ (ε of eq. (ysafe))."""
 
 SolverName = Literal["projected_newton", "sqp_lbfgs", "sqp_exact", "ipopt", "paper_sqp"]
-"""The MPC's solver (:mod:`moose.mpc.solver`; docs/design.md, "MPC"): ``projected_newton``: exact
+"""The MPC's solver (:mod:`moose.planner.mpc.solver`; docs/design.md, "MPC"): ``projected_newton``: exact
 Hessian, compiled C (the default); ``sqp_lbfgs``: CasADi's sqpmethod with a BFGS Hessian;
 ``sqp_exact``: sqpmethod with the exact Hessian, regularised to be positive definite; ``ipopt``:
 interior point (a reference); ``paper_sqp``: the paper's baseline, fmincon's SQP algorithm with

@@ -3,7 +3,7 @@
 Rates (``SimulationParams``): the plant is integrated at 1 kHz; sensors,
 observer, detector and motion control run at 100 Hz (GPS at 1 Hz with its lag);
 MPC, MSF, the weight function and the FBL run every t_s = 0.2 s (5 Hz, the
-MicroLabBox's rate; :class:`moose.planning.PlanningStep`), and re-plan at once
+MicroLabBox's rate; :class:`moose.planner.step.PlanningStep`), and re-plan at once
 when the detector reports a new obstacle (the planning period restarts there).
 Each planning instant uses the estimate of that instant and its result acts from
 that motion tick on (zero compute latency in lockstep; the node graph has the
@@ -23,7 +23,7 @@ from .detector import ObstacleDetector
 from .maneuver import MaxSteeringTable
 from .motion import MotionController
 from .observer import StateObserver
-from .planning import PlanningRecord, PlanningStep, new_obstacle
+from .planner.step import PlanningRecord, PlanningStep, new_obstacle
 from .scenario import Scenario
 from .schema import Config, PlannerMode
 from .sensors import Sensors

@@ -463,7 +463,7 @@ def markers_to_msg(node: Any, t: float, threat: Optional[Threat], mpc: Optional[
     """``/planning/markers`` of one planning instant, in odom: the danger zone (the box the CoG must avoid,
     the paper's red box) and its width w from the ego path toward the evasion side (a Threat's ``y_path``,
     ``side`` and ``w``), and the predicted paths of the MPC and the MSF planner (``PlanResult.predicted``)
-    and of the blend (``blend``: (N + 1, ≥ 2) positions, :func:`moose.planning.blend_path`).  What is
+    and of the blend (``blend``: (N + 1, ≥ 2) positions, :func:`moose.planner.step.blend_path`).  What is
     absent is deleted (action DELETE), so a viewer never keeps a stale zone or path."""
     zone = _marker(node, t, "danger_zone", _CUBE)
     width = _marker(node, t, "danger_zone_width", _ARROW)

@@ -39,7 +39,7 @@ import numpy as np
 from moose.config import load_config
 from moose.metrics import summarize
 from moose.params import ParamError, read_ros_params
-from moose.planning import PlanningRecord
+from moose.planner.step import PlanningRecord
 from moose.scenario import Scenario
 from moose.schema import Config, PlannerMode
 from moose.signals import Blend, Reference

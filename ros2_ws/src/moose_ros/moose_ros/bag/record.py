@@ -70,7 +70,7 @@ def record_result(result: Any, path: str | Path) -> dict[str, int]:
 
     import numpy as np
 
-    from moose.planning import blend_path
+    from moose.planner.step import blend_path
     from moose.signals import Reference
 
     from .. import convert as cv

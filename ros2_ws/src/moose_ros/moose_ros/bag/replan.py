@@ -1,7 +1,7 @@
 """Re-plan a bag open-loop: the planners on its recorded state and threats at its planning instants, compared
 with what was recorded (``moose bag replan``), and the figure of the comparison.
 
-Each planning instant runs the core's planning step (:class:`moose.planning.PlanningStep`), the code
+Each planning instant runs the core's planning step (:class:`moose.planner.step.PlanningStep`), the code
 the lockstep loop and the ``weight_fbl`` node run.
 """
 from __future__ import annotations
@@ -36,7 +36,7 @@ def replan(path: str | Path, config: Any = None, planner: Optional[PlannerMode] 
     skipped and counted in ``report`` and in the summary's ``invalid_messages``.
     """
     from moose.config import load_config
-    from moose.planning import PlanningStep
+    from moose.planner.step import PlanningStep
 
     used = (STATE, THREAT, PLAN_MPC, PLAN_MSF, BLEND)
     reader = BagReader(path, report)

@@ -6,9 +6,9 @@ from typing import Any, Optional
 
 import numpy as np
 
-from moose.planning import new_obstacle
+from moose.planner.step import new_obstacle
+from moose.planner.weight import WeightFunction
 from moose.signals import PlannerInput, StateEstimate, Threat
-from moose.weight import WeightFunction
 
 from .. import convert as cv
 from ..graph import BLEND, PLANS, STATE, THREAT
@@ -17,7 +17,7 @@ from .base import ERROR, OK, WARN, GraphNode
 
 class Planner(GraphNode):
     """MPC or MSF planner at the planning rate (5 Hz), and at once on a new obstacle, which restarts the
-    planning period (:func:`moose.planning.new_obstacle`, as in the lockstep loop)."""
+    planning period (:func:`moose.planner.step.new_obstacle`, as in the lockstep loop)."""
 
     kind = ""
 
@@ -95,7 +95,7 @@ class MpcPlannerNode(Planner):
         self.subscribe(BLEND, lambda blend: setattr(self, "guess", WeightFunction.next_initial_guess(blend)))
 
     def make_planner(self) -> Any:
-        from moose.mpc import MpcPlanner
+        from moose.planner.mpc import MpcPlanner
 
         return MpcPlanner(self.config.mpc, self.config.grid)
 
@@ -106,6 +106,6 @@ class MsfPlannerNode(Planner):
     name, kind = "msf_planner", "msf"
 
     def make_planner(self) -> Any:
-        from moose.msf import MsfPlanner
+        from moose.planner.msf import MsfPlanner
 
         return MsfPlanner(self.config.msf, self.config.grid, self.table())

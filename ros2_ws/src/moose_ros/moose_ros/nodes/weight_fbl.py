@@ -2,7 +2,7 @@
 and the markers of the instant (danger zone, predicted paths).
 
 The mode switch, the blend, the FBL reference and the next initial guess are the core's planning
-step (:class:`moose.planning.PlanningStep`), the code the lockstep loop runs.
+step (:class:`moose.planner.step.PlanningStep`), the code the lockstep loop runs.
 
 Supervision: a planner whose plan topic is past its deadline (:attr:`moose_ros.graph.Topic.deadline`, two
 planning periods) is *silent*; in ``combined`` mode the other planner's plan is applied alone (WARN
@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from typing import Any, Optional
 
-from moose.planning import PlanningStep, blend_path
+from moose.planner.step import PlanningStep, blend_path
 from moose.signals import PlanResult, StateEstimate, Threat
 
 from .. import convert as cv
@@ -28,7 +28,7 @@ MODE_PLANNERS = {"combined": ("mpc", "msf"), "mpc": ("mpc",), "msf": ("msf",)}
 
 class WeightFbl(GraphNode):
     """Weight function and FBL: combines the plans of one planning instant through the core's planning
-    step (:class:`moose.planning.PlanningStep`, as the lockstep loop does) and emits the references."""
+    step (:class:`moose.planner.step.PlanningStep`, as the lockstep loop does) and emits the references."""
 
     name = "weight_fbl"
 

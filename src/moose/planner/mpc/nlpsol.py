@@ -13,7 +13,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from ..schema import MpcParams
+from ...schema import MpcParams
 from .cost import Problem
 from .solver import CompiledCost, Solver, SolveResult, SolveStatus, register
 

@@ -23,13 +23,13 @@ from typing import TYPE_CHECKING, Optional
 
 import numpy as np
 
+from ..schema import Config, PlannerMode
+from ..signals import Blend, PlannerInput, PlanResult, Reference, StateEstimate, Threat
 from .fbl import FeedbackLinearization
-from .schema import Config, PlannerMode
-from .signals import Blend, PlannerInput, PlanResult, Reference, StateEstimate, Threat
 from .weight import WeightFunction
 
 if TYPE_CHECKING:  # the planners (CasADi) are imported only where they run, not in the weight_fbl node
-    from .maneuver import MaxSteeringTable
+    from ..maneuver import MaxSteeringTable
     from .mpc import MpcPlanner
     from .msf import MsfPlanner
 
@@ -95,7 +95,7 @@ class PlanningStep:
 
             self.mpc = MpcPlanner(config.mpc, self.grid)
         if planners and self.mode != "mpc":
-            from .maneuver import MaxSteeringTable
+            from ..maneuver import MaxSteeringTable
             from .msf import MsfPlanner
 
             self.msf = MsfPlanner(config.msf, self.grid, table or MaxSteeringTable.build(model, config.maneuver))

@@ -1,12 +1,12 @@
 """MPC planner on the kinematic model, Sec. IV-B: eqs. (skin), (ysafe), (costs), (jcaldef), (planmpc).
 
-* :mod:`moose.mpc.cost` — the problem: cost terms, the kinematic prediction, 𝒥 as a CasADi function;
-* :mod:`moose.mpc.solver` — the solver interface (:class:`Solver`, :class:`SolveResult`) and the
+* :mod:`moose.planner.mpc.cost` — the problem: cost terms, the kinematic prediction, 𝒥 as a CasADi function;
+* :mod:`moose.planner.mpc.solver` — the solver interface (:class:`Solver`, :class:`SolveResult`) and the
   registry of solvers by name (``mpc.solver``):
-  ``projected_newton`` (:mod:`moose.mpc.newton`, the default), ``sqp_lbfgs``, ``sqp_exact``,
-  ``ipopt`` (:mod:`moose.mpc.nlpsol`) and ``paper_sqp`` (:mod:`moose.mpc.paper_sqp`, the paper's
+  ``projected_newton`` (:mod:`moose.planner.mpc.newton`, the default), ``sqp_lbfgs``, ``sqp_exact``,
+  ``ipopt`` (:mod:`moose.planner.mpc.nlpsol`) and ``paper_sqp`` (:mod:`moose.planner.mpc.paper_sqp`, the paper's
   fmincon baseline);
-* :mod:`moose.mpc.planner` — :class:`MpcPlanner`, one planning instant.
+* :mod:`moose.planner.mpc.planner` — :class:`MpcPlanner`, one planning instant.
 """
 from __future__ import annotations
 

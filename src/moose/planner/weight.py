@@ -36,9 +36,9 @@ from typing import Optional
 
 import numpy as np
 
+from ..schema import WeightParams
+from ..signals import Blend, PlanResult, StateEstimate, Threat
 from .fbl import FeedbackLinearization
-from .schema import WeightParams
-from .signals import Blend, PlanResult, StateEstimate, Threat
 
 STATUS_FACTOR = {"converged": 1.0}
 """S(status) for statuses other than ``capped`` (which uses ``capped_factor``); every other status gives 0."""

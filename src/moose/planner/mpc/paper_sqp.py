@@ -41,8 +41,8 @@ from typing import Callable, Literal
 
 import numpy as np
 
-from ..params import check, positive
-from ..schema import MpcParams
+from ...params import check, positive
+from ...schema import MpcParams
 from .cost import Problem
 from .solver import CompiledCost, Solver, SolveResult, SolveStatus, register
 

@@ -47,10 +47,10 @@ from typing import Optional
 
 import numpy as np
 
-from .maneuver import MaxSteeringTable
-from .planning import zoh_rollout
-from .schema import MsfParams, PlanningGrid
-from .signals import Obstacle, PlannerInput, PlanResult, PlanStatus
+from ..maneuver import MaxSteeringTable
+from ..schema import MsfParams, PlanningGrid
+from ..signals import Obstacle, PlannerInput, PlanResult, PlanStatus
+from .step import zoh_rollout
 
 
 def _quintic(left: tuple[float, float, float], right: tuple[float, float, float], length: float,

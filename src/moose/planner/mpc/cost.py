@@ -41,8 +41,8 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from ..params import G
-from ..schema import MpcParams
+from ...params import G
+from ...schema import MpcParams
 
 
 def epsilon(mu: float) -> float:

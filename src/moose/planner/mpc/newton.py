@@ -1,4 +1,4 @@
-"""``mpc.solver: projected_newton`` (the default): :mod:`moose.projected_newton` on eq. (planmpc).
+"""``mpc.solver: projected_newton`` (the default): :mod:`moose.planner.mpc.projected_newton` on eq. (planmpc).
 
 The problem has only the input bounds as constraints, so a general SQP spends most of its time
 on QPs that here reduce to the active set of a box.  The projected Newton method uses the exact
@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..projected_newton import CompilerMissing, NewtonOptions, NewtonStatus, ProjectedNewton
-from ..schema import MpcParams
+from ...schema import MpcParams
 from .cost import Problem
+from .projected_newton import CompilerMissing, NewtonOptions, NewtonStatus, ProjectedNewton
 from .solver import Solver, SolveResult, SolveStatus, register
 
 STATUS: dict[NewtonStatus, SolveStatus] = {

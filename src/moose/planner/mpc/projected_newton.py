@@ -24,8 +24,8 @@ from typing import Literal
 import casadi as ca
 import numpy as np
 
-from .ccompile import CompiledFunction, compile_library
-from .params import check, positive
+from ...ccompile import CompiledFunction, compile_library
+from ...params import check, positive
 
 NewtonStatus = Literal["converged", "small_step", "max_iter", "max_evals", "line_search", "not_finite"]
 """Why the iteration stopped, in the order of the C enum ``PN_*``."""

@@ -1,6 +1,6 @@
 """One interface for the solvers of eq. (planmpc), chosen by name (``mpc.solver``).
 
-A solver is built once per problem (:class:`moose.mpc.cost.Problem`) and parameter set, and
+A solver is built once per problem (:class:`moose.planner.mpc.cost.Problem`) and parameter set, and
 then solves it at every planning instant from an initial guess: :meth:`Solver.solve` takes the
 normalised inputs (2 N_p, within [−1, 1]) and the parameter vector and returns a
 :class:`SolveResult`.  Solvers register their name with :func:`register`; the names a
@@ -16,8 +16,8 @@ from typing import Callable, Literal, TypeVar
 
 import numpy as np
 
-from ..ccompile import compile_function
-from ..schema import MpcParams
+from ...ccompile import compile_function
+from ...schema import MpcParams
 from .cost import Problem
 
 SolveStatus = Literal["converged", "capped", "failed"]

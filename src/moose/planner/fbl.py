@@ -21,10 +21,10 @@ import math
 
 import numpy as np
 
-from .params import VehicleParams
-from .schema import FblParams
-from .signals import Reference, StateEstimate
-from .tire import inverse_lateral, pacejka
+from ..params import VehicleParams
+from ..schema import FblParams
+from ..signals import Reference, StateEstimate
+from ..tire import inverse_lateral, pacejka
 
 
 class FeedbackLinearization:

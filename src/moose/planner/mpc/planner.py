@@ -1,8 +1,8 @@
 """The MPC planner of Sec. IV-B: eq. (planmpc) solved at every planning instant.
 
 :class:`MpcPlanner` turns a :class:`moose.signals.PlannerInput` into the problem's parameters
-(:data:`moose.mpc.cost.PARAMETERS`) and an initial guess, lets the configured solver
-(:mod:`moose.mpc.solver`) minimise the cost of :mod:`moose.mpc.cost`, and returns the plan in
+(:data:`moose.planner.mpc.cost.PARAMETERS`) and an initial guess, lets the configured solver
+(:mod:`moose.planner.mpc.solver`) minimise the cost of :mod:`moose.planner.mpc.cost`, and returns the plan in
 m/s² with its predicted states.  The returned plan is projected onto v_X ≥ 0 and is never
 costlier than its start.
 """
@@ -15,8 +15,8 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from ..schema import MpcParams, PlanningGrid
-from ..signals import PlannerInput, PlanResult, PlanStatus
+from ...schema import MpcParams, PlanningGrid
+from ...signals import PlannerInput, PlanResult, PlanStatus
 from . import solver as solvers
 from .cost import P_VX, build_problem, epsilon, kinematic_rollout, speed_floor
 
@@ -75,7 +75,7 @@ class MpcPlanner:
         return np.array([self.grid.a_x_max, self.grid.a_y_max])
 
     def parameters(self, inp: PlannerInput) -> np.ndarray:
-        """The problem's parameter vector (:data:`moose.mpc.cost.PARAMETERS`) at a planning instant."""
+        """The problem's parameter vector (:data:`moose.planner.mpc.cost.PARAMETERS`) at a planning instant."""
         est, threat, grid = inp.estimate, inp.threat, self.grid
         if threat is not None:
             box = threat.obstacle

@@ -1,7 +1,7 @@
 /*
  * Projected Newton method for   min f(u, p)   s.t.   lb <= u <= ub
  * (D. P. Bertsekas, "Projected Newton methods for optimization problems with simple
- * constraints", SIAM J. Control Optim. 20(2), 1982), the solver of moose.projected_newton.
+ * constraints", SIAM J. Control Optim. 20(2), 1982), the solver of moose.planner.mpc.projected_newton.
  *
  * This file is compiled after the CasADi-generated C of two functions of (u, p):
  *   pn_cost        -> f                  (a cost evaluation: one line-search trial)
