@@ -42,7 +42,8 @@ from scipy.optimize import minimize
 from moose.config import load_config
 from moose.paper import PAPER_FRICTION
 from moose.params import replace
-from moose.planner.mpc import MpcPlanner, kinematic_rollout
+from moose.planner.kinematics import kinematic_rollout
+from moose.planner.mpc import MpcPlanner
 from moose.schema import MpcParams, PlanningGrid, SolverCaps
 from moose.signals import Obstacle, PlannerInput, StateEstimate, Threat
 

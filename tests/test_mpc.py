@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from moose.params import G, ParamError
+from moose.planner.kinematics import kinematic_rollout
 from moose.planner.mpc import (
     MpcPlanner,
     epsilon,
@@ -18,7 +19,6 @@ from moose.planner.mpc import (
     j_safe,
     j_stable,
     j_steer,
-    kinematic_rollout,
     past_obstacle,
     y_safe,
 )
@@ -117,16 +117,6 @@ def test_absolute_values_are_smooth_approximations() -> None:
     assert math.isfinite(j_stable(0.0, 1.0))  # |v_Y / v_X| regularised at v_X = 0
     assert past_obstacle(0.0, 12.0) < 1e-6 and past_obstacle(12.0, 12.0) < 0.02
     assert past_obstacle(13.0, 12.0) == pytest.approx(0.5) and past_obstacle(16.0, 12.0) > 0.99
-
-
-def test_exact_hold_prediction() -> None:
-    a = np.array([[1.5, -2.0]] * 5)
-    pred = kinematic_rollout(np.array([1.0, 2.0, 7.0, 0.5]), a, 0.2)
-    t = 0.2 * np.arange(6)
-    np.testing.assert_allclose(pred[:, 0], 1.0 + 7.0 * t + 0.75 * t**2, atol=1e-12)
-    np.testing.assert_allclose(pred[:, 1], 2.0 + 0.5 * t - 1.0 * t**2, atol=1e-12)
-    np.testing.assert_allclose(pred[:, 2:], [[7.0 + 1.5 * s, 0.5 - 2.0 * s] for s in t], atol=1e-12)
-    assert pred[1, 1] != pred[0, 1] + 0.2 * 0.5  # unlike Euler, the first input moves y(k+1)
 
 
 def fly(x: float, y: float, vx: float, vy: float, ax: float, ay: float, t_s: float, n: int = 400) -> tuple:

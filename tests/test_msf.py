@@ -10,7 +10,8 @@ from moose.detector import ObstacleDetector
 from moose.maneuver import MaxSteeringTable
 from moose.paper import PAPER_FRICTION
 from moose.params import ParamError, VehicleParams
-from moose.planner.msf import MsfPlanner, zoh_rollout
+from moose.planner.kinematics import kinematic_rollout
+from moose.planner.msf import MsfPlanner
 from moose.schema import Config, DetectorParams, ManeuverParams, MsfParams
 from moose.signals import Obstacle, PlannerInput, StateEstimate
 
@@ -48,7 +49,7 @@ def closed_loop(table: MaxSteeringTable, v: float, zone: Obstacle, steps: int = 
         assert np.all(np.abs(plan.accel) <= [GRID.a_x_max + 1e-12, GRID.a_y_max + 1e-12])
         np.testing.assert_allclose(plan.predicted[0], state)
         for j in range(1, 21):  # exact motion inside the step
-            fine.append(zoh_rollout(state, plan.accel[:1], 0.01 * j)[1])
+            fine.append(kinematic_rollout(state, plan.accel[:1], 0.01 * j)[1])
         state = plan.predicted[1]
     return np.array(fine), plans
 
@@ -204,23 +205,6 @@ def test_new_obstacle_restarts_the_maneuver(table: MaxSteeringTable) -> None:
     second = ObstacleDetector(DetectorParams(), table).update(1.0, est1, [Obstacle(24.0, 26.0, -2.0, 2.0)])
     a1 = planner.plan(PlannerInput(1.0, est1, second, 6.0, None)).accel
     np.testing.assert_allclose(a1, a0, atol=1e-12)
-
-
-def test_zoh_rollout_is_exact_for_piecewise_constant_acceleration() -> None:
-    rng = np.random.default_rng(0)
-    accel = rng.uniform(-6.0, 6.0, (10, 2))
-    state = np.array([1.0, -2.0, 6.0, 0.5])
-    out = zoh_rollout(state, accel, T_S)
-    # independent: fine semi-analytic integration (velocity exact, position by the trapezoidal rule)
-    n = 2000
-    dt = T_S / n
-    p, vel = state[:2].copy(), state[2:].copy()
-    for k in range(10):
-        for _ in range(n):
-            v_next = vel + dt * accel[k]
-            p = p + 0.5 * dt * (vel + v_next)
-            vel = v_next
-        np.testing.assert_allclose(out[k + 1], np.concatenate([p, vel]), atol=1e-9)
 
 
 @pytest.mark.parametrize("field, value", [("margin", -0.1),

@@ -1,5 +1,5 @@
-"""Dependencies the right way up: the core never imports moose_ros; moose_ros adds its commands and the bag
-recorder of ``moose simulate`` as plugins (entry points)."""
+"""Dependencies the right way up: the core never imports moose_ros and has no import cycle; moose_ros adds its
+commands and the bag recorder of ``moose simulate`` as plugins (entry points)."""
 from __future__ import annotations
 
 import ast
@@ -28,6 +28,103 @@ def test_the_core_never_imports_moose_ros() -> None:
             offenders += [f"{path.relative_to(ROOT)}:{node.lineno}: {n}"
                           for n in names if n.split(".")[0] == "moose_ros"]
     assert offenders == []
+
+
+def core_modules() -> dict[str, Path]:
+    """Dotted name → file of every module and package of src/moose."""
+    found = {}
+    for path in sorted((ROOT / "src" / "moose").rglob("*.py")):
+        parts = path.relative_to(ROOT / "src").with_suffix("").parts
+        found[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    return found
+
+
+def _type_checking(node: ast.If) -> bool:
+    """``if TYPE_CHECKING:`` or ``if typing.TYPE_CHECKING:``."""
+    test = node.test
+    return isinstance(test, ast.Name) and test.id == "TYPE_CHECKING" or \
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING"
+
+
+def imported(name: str, path: Path, known: set[str]) -> set[str]:
+    """The core modules that module ``name`` imports, at import time or inside a function (a lazy import is an
+    import too); what a ``TYPE_CHECKING`` block imports is not.  ``from X import y`` imports the module X.y when
+    that exists, else X."""
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    targets: set[str] = set()
+
+    def visit(node: ast.AST) -> None:
+        if isinstance(node, ast.If) and _type_checking(node):
+            for child in node.orelse:
+                visit(child)
+            return
+        if isinstance(node, ast.Import):
+            targets.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = package.split(".")[:len(package.split(".")) - node.level + 1] if node.level else []
+            module = ".".join(base + ([node.module] if node.module else []))
+            targets.update(f"{module}.{a.name}" if f"{module}.{a.name}" in known else module for a in node.names)
+        for child in ast.iter_child_nodes(node):
+            visit(child)
+
+    visit(ast.parse(path.read_text(encoding="utf-8")))
+    return {t for t in targets if t in known and t != name}
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    found: list[list[str]] = []
+
+    def connect(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                connect(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            connect(v)
+    return found
+
+
+def test_cycles_finds_a_loop_and_only_a_loop() -> None:
+    assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert cycles({"a": {"b"}, "b": set(), "c": {"b"}}) == []
+
+
+def test_imports_resolve_relative_lazy_and_type_checking_imports(tmp_path: Path) -> None:
+    pkg = tmp_path / "moose" / "planner"
+    pkg.mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "step.py").write_text("from typing import TYPE_CHECKING\nfrom .. import signals\nfrom .fbl import F\n"
+                                 "if TYPE_CHECKING:\n    from .msf import M\nelse:\n    import moose.schema\n"
+                                 "def f():\n    from ..maneuver import T\n")
+    known = {"moose", "moose.planner", "moose.planner.step", "moose.planner.fbl", "moose.planner.msf",
+             "moose.signals", "moose.schema", "moose.maneuver"}
+    assert imported("moose.planner.step", pkg / "step.py", known) == {
+        "moose.signals", "moose.planner.fbl", "moose.schema", "moose.maneuver"}
+
+
+def test_the_core_has_no_import_cycle() -> None:
+    modules = core_modules()
+    graph = {name: imported(name, path, set(modules)) for name, path in modules.items()}
+    assert cycles(graph) == []
 
 
 def test_moose_ros_registers_its_commands_and_the_recorder() -> None:

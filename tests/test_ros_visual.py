@@ -8,7 +8,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from moose.planner.step import blend_path, zoh_rollout
+from moose.planner.kinematics import kinematic_rollout
+from moose.planner.step import blend_path
 from moose.signals import Blend, Obstacle, PlanResult, StateEstimate, Threat
 from moose_ros import convert as cv
 from moose_ros.graph import FRAME_BASE, FRAME_ODOM, FRAME_TRUTH, SENSOR_MOUNTS
@@ -53,7 +54,7 @@ def test_static_transforms_put_each_sensor_at_its_mount() -> None:
 
 
 def _plan(state: np.ndarray, accel: np.ndarray) -> PlanResult:
-    return PlanResult(accel, "converged", 3, 1e-3, 1.0, zoh_rollout(state, accel, 0.2))
+    return PlanResult(accel, "converged", 3, 1e-3, 1.0, kinematic_rollout(state, accel, 0.2))
 
 
 def test_markers_show_the_zone_its_width_and_the_three_paths() -> None:

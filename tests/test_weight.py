@@ -8,7 +8,7 @@ import pytest
 
 from moose.params import ParamError, VehicleParams
 from moose.planner.fbl import FeedbackLinearization
-from moose.planner.msf import zoh_rollout
+from moose.planner.kinematics import kinematic_rollout
 from moose.planner.weight import WeightFunction
 from moose.schema import FblParams, WeightParams
 from moose.signals import Blend, Obstacle, PlanResult, StateEstimate, Threat
@@ -24,7 +24,7 @@ def wf(**changes: float) -> WeightFunction:
 
 def plan(ay: float, status: str = "converged", ax: float = 0.0, v: float = 7.0) -> PlanResult:
     accel = np.tile([ax, ay], (10, 1))
-    return PlanResult(accel, status, 5, 1e-3, 1.0, zoh_rollout(np.array([0.0, 0.0, v, 0.0]), accel, 0.2))
+    return PlanResult(accel, status, 5, 1e-3, 1.0, kinematic_rollout(np.array([0.0, 0.0, v, 0.0]), accel, 0.2))
 
 
 def threat(tau: float = 3.0, nu: float = 0.3) -> Threat:
@@ -60,7 +60,7 @@ def test_steering_usage_of_the_first_steps() -> None:
     # later rows count: a plan that steers hard only in its second step is near the limits too
     accel = np.zeros((10, 2))
     accel[1, 1] = 6.0
-    late = PlanResult(accel, "converged", 5, 1e-3, 1.0, zoh_rollout(np.array([0.0, 0.0, 5.0, 0.0]), accel, 0.2))
+    late = PlanResult(accel, "converged", 5, 1e-3, 1.0, kinematic_rollout(np.array([0.0, 0.0, 5.0, 0.0]), accel, 0.2))
     est5 = StateEstimate(0.0, 0.0, 0.0, 0.0, 5.0, 0.0, 0.0, 0.0)
     # 6 m/s² at 5 m/s needs 0.408 rad of kinematic steering (curvature a / v² = tan δ / L): beyond δ_max
     assert f.steering_usage(late, est5) > 1.3
@@ -75,7 +75,7 @@ def test_blend_is_convex_and_failure_falls_back_to_msf() -> None:
     f = wf(smoothing=1.0)
     rng = np.random.default_rng(1)
     mpc = PlanResult(rng.uniform(-1, 1, (10, 2)), "converged", 5, 1e-3, 1.0,
-                     zoh_rollout(np.array([0, 0, 7.0, 0]), np.zeros((10, 2)), 0.2))
+                     kinematic_rollout(np.array([0, 0, 7.0, 0]), np.zeros((10, 2)), 0.2))
     msf = plan(3.0, "ok")
     blend = f.blend(mpc, msf, threat(), EST)
     assert 0.0 < blend.weight_mpc < 1.0
@@ -134,7 +134,7 @@ def test_steering_usage_is_the_steering_the_car_needs_for_the_planned_accelerati
         accel = np.zeros((10, 2))
         accel[1, 1] = a_y
         ahead = PlanResult(accel, "converged", 5, 1e-3, 1.0,
-                           zoh_rollout(np.array([0.0, 0.0, 5.0, 0.0]), np.zeros((10, 2)), 0.2))
+                           kinematic_rollout(np.array([0.0, 0.0, 5.0, 0.0]), np.zeros((10, 2)), 0.2))
         est5 = StateEstimate(0.0, 0.0, 0.0, 0.0, 5.0, 0.0, 0.0, 0.0)
         assert wf(n_rho=3).steering_usage(ahead, est5) == pytest.approx(abs(a_y) / a_per_rad / VEHICLE.delta_max,
                                                                         rel=0.02)

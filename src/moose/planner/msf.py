@@ -50,7 +50,7 @@ import numpy as np
 from ..maneuver import MaxSteeringTable
 from ..schema import MsfParams, PlanningGrid
 from ..signals import Obstacle, PlannerInput, PlanResult, PlanStatus
-from .step import zoh_rollout
+from .kinematics import kinematic_rollout
 
 
 def _quintic(left: tuple[float, float, float], right: tuple[float, float, float], length: float,
@@ -249,7 +249,7 @@ class MsfPlanner:
             y += ts * vY + 0.5 * ts * ts * a_lat
             vX += ts * a_lon
             vY += ts * a_lat
-        predicted = zoh_rollout(state, accel, ts)
+        predicted = kinematic_rollout(state, accel, ts)
         status: PlanStatus = "ok" if evasion is not None else "idle"
         return PlanResult(accel=accel, status=status, iterations=0, solve_time_s=time.perf_counter() - start,
                           cost=0.0, predicted=predicted)

@@ -26,6 +26,7 @@ import numpy as np
 from ..schema import Config, PlannerMode
 from ..signals import Blend, PlannerInput, PlanResult, Reference, StateEstimate, Threat
 from .fbl import FeedbackLinearization
+from .kinematics import kinematic_rollout
 from .weight import WeightFunction
 
 if TYPE_CHECKING:  # the planners (CasADi) are imported only where they run, not in the weight_fbl node
@@ -48,24 +49,11 @@ class PlanningRecord:
     """δ* the FBL computes from the MPC's own first acceleration (the paper's δ_MPC); NaN without an MPC plan."""
 
 
-def zoh_rollout(state: np.ndarray, accel: np.ndarray, t_s: float) -> np.ndarray:
-    """eq. (skin) with exact zero-order hold: (N + 1, 4) states [x, y, v_X, v_Y] from (N, 2) accelerations.
-
-    p⁺ = p + t_s v + t_s²/2 a,  v⁺ = v + t_s a (exact for a double integrator).
-    """
-    state = np.asarray(state, dtype=float)
-    accel = np.asarray(accel, dtype=float).reshape(-1, 2)
-    out = np.empty((len(accel) + 1, 4))
-    out[0] = state
-    out[1:, 2:] = state[2:] + t_s * np.cumsum(accel, axis=0)
-    out[1:, :2] = state[:2] + np.cumsum(t_s * out[:-1, 2:] + 0.5 * t_s**2 * accel, axis=0)
-    return out
-
-
 def blend_path(blend: Blend, estimate: StateEstimate, t_s: float) -> np.ndarray:
     """(N_p + 1, 4) kinematic states [x, y, v_X, v_Y] the blended plan predicts from ``estimate``: eq. (skin)
-    under :func:`zoh_rollout` (what the MPC's and MSF's ``PlanResult.predicted`` are for their own plans)."""
-    return zoh_rollout(np.array([estimate.x, estimate.y, estimate.vX, estimate.vY]), blend.accel, t_s)
+    under :func:`~moose.planner.kinematics.kinematic_rollout` (what the MPC's and MSF's ``PlanResult.predicted`` are
+    for their own plans)."""
+    return kinematic_rollout(np.array([estimate.x, estimate.y, estimate.vX, estimate.vY]), blend.accel, t_s)
 
 
 def new_obstacle(previous: Optional[Threat], current: Optional[Threat]) -> bool:

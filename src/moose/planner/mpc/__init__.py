@@ -1,6 +1,7 @@
 """MPC planner on the kinematic model, Sec. IV-B: eqs. (skin), (ysafe), (costs), (jcaldef), (planmpc).
 
-* :mod:`moose.planner.mpc.cost` — the problem: cost terms, the kinematic prediction, 𝒥 as a CasADi function;
+* :mod:`moose.planner.mpc.cost` — the problem: cost terms, the prediction on :mod:`moose.planner.kinematics`,
+  𝒥 as a CasADi function;
 * :mod:`moose.planner.mpc.solver` — the solver interface (:class:`Solver`, :class:`SolveResult`) and the
   registry of solvers by name (``mpc.solver``):
   ``projected_newton`` (:mod:`moose.planner.mpc.newton`, the default), ``sqp_lbfgs``, ``sqp_exact``,
@@ -21,8 +22,6 @@ from .cost import (
     j_safe,
     j_stable,
     j_steer,
-    kinematic_rollout,
-    kinematic_step,
     past_obstacle,
     speed_floor,
     y_safe,
@@ -33,5 +32,5 @@ from .solver import Solver, SolveResult, SolveStatus, create, register, register
 __all__ = [
     "MpcPlanner", "PARAMETERS", "Problem", "SolveResult", "SolveStatus", "Solver", "build_problem", "create",
     "epsilon", "j_brake", "j_return", "j_safe", "j_stable", "j_steer", "keep_speed_non_negative",
-    "kinematic_rollout", "kinematic_step", "past_obstacle", "register", "registered", "speed_floor", "y_safe",
+    "past_obstacle", "register", "registered", "speed_floor", "y_safe",
 ]

@@ -9,9 +9,9 @@ v_des, the obstacle's extent, w, the evasion side, the ego path, ε (i.e. μ) an
 
 Choices where the paper is silent or inconsistent (docs/design.md, "MPC"):
 
-* eq. (skin) is discretised with the exact zero-order hold
-  p⁺ = p + t_s v + t_s²/2 a, v⁺ = v + t_s a (forward Euler would give
-  y(k+1) = y(k) whatever the input: the first predicted step could not react).
+* eq. (skin) is discretised with the exact zero-order hold of :mod:`moose.planner.kinematics`
+  (forward Euler would give y(k+1) = y(k) whatever the input: the first predicted step could
+  not react).
 * Barrier sign: the printed J_safe = −log(y_safe − y) keeps the ego *below* the
   sigmoid, i.e. in the obstacle; Example emp:eta and Fig. barrier describe the ego
   kept above it.  We use the offset toward the evasion side ỹ = s (y − y_path)
@@ -43,6 +43,7 @@ import numpy as np
 
 from ...params import G
 from ...schema import MpcParams
+from ..kinematics import kinematic_step
 
 
 def epsilon(mu: float) -> float:
@@ -131,29 +132,13 @@ def past_obstacle(x_ego: Any, x_far: Any, margin: float = 1.0) -> Any:
 
 
 # ---------------------------------------------------------------------------
-# Prediction
+# Parameters and the speed floor
 # ---------------------------------------------------------------------------
 
 PARAMETERS = ("x", "y", "vX", "vY", "v_des", "x_near", "x_far", "w", "side", "y_path", "active",
               "epsilon", "a_x_max", "a_y_max")
 """Order of the problem's parameter vector (``active`` = 1 with a threat, 0 without)."""
 P_VX, P_AX_MAX = PARAMETERS.index("vX"), PARAMETERS.index("a_x_max")
-
-
-def kinematic_step(state: Any, accel: Any, t_s: float) -> tuple[Any, Any, Any, Any]:
-    """eq. (skin) over one period with the input held (exact zero-order hold)."""
-    x, y, vX, vY = state
-    aX, aY = accel
-    h = 0.5 * t_s * t_s
-    return x + t_s * vX + h * aX, y + t_s * vY + h * aY, vX + t_s * aX, vY + t_s * aY
-
-
-def kinematic_rollout(state: np.ndarray, accel: np.ndarray, t_s: float) -> np.ndarray:
-    """eq. (skin) with exact zero-order hold: (N+1, 4) states [x, y, v_X, v_Y] from (N, 2) accelerations."""
-    rows = [tuple(np.asarray(state, dtype=float).reshape(4).tolist())]
-    for a in np.asarray(accel, dtype=float).reshape(-1, 2).tolist():  # on Python floats: the same sums, faster
-        rows.append(kinematic_step(rows[-1], a, t_s))
-    return np.array(rows, dtype=float)
 
 
 def speed_floor(vX0: float, n_p: int, t_s: float, a_x_max: float) -> np.ndarray:

@@ -17,8 +17,9 @@ import numpy as np
 
 from ...schema import MpcParams, PlanningGrid
 from ...signals import PlannerInput, PlanResult, PlanStatus
+from ..kinematics import kinematic_rollout
 from . import solver as solvers
-from .cost import P_VX, build_problem, epsilon, kinematic_rollout, speed_floor
+from .cost import P_VX, build_problem, epsilon, speed_floor
 
 
 @lru_cache(maxsize=16)
