@@ -102,7 +102,8 @@ class LaneReturn:
 
 
 class MsfPlanner:
-    """Maximum steering feed-forward; remembers the current evasion or return it is flying."""
+    """Maximum steering feed-forward (a :class:`moose.planner.Planner`); remembers the current evasion or return
+    it is flying."""
 
     def __init__(self, params: MsfParams, grid: PlanningGrid, table: MaxSteeringTable) -> None:
         self.params = params
@@ -114,6 +115,7 @@ class MsfPlanner:
         self._return: Optional[LaneReturn] = None
 
     def reset(self) -> None:
+        """Forget the evasion or return under way: the next plan keeps the lane or starts a new evasion."""
         self._evasion = None
         self._return = None
 

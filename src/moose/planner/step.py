@@ -25,14 +25,13 @@ import numpy as np
 
 from ..schema import Config, PlannerMode
 from ..signals import Blend, PlannerInput, PlanResult, Reference, StateEstimate, Threat
+from . import Planner
 from .fbl import FeedbackLinearization
 from .kinematics import kinematic_rollout
 from .weight import WeightFunction
 
 if TYPE_CHECKING:  # the planners (CasADi) are imported only where they run, not in the weight_fbl node
     from ..maneuver import MaxSteeringTable
-    from .mpc import MpcPlanner
-    from .msf import MsfPlanner
 
 
 @dataclasses.dataclass(frozen=True)
@@ -76,8 +75,8 @@ class PlanningStep:
         model = config.model_vehicle
         self.fbl = FeedbackLinearization(config.fbl, model, self.grid.t_s)
         self.weight = WeightFunction(config.weight, self.fbl)
-        self.mpc: Optional["MpcPlanner"] = None
-        self.msf: Optional["MsfPlanner"] = None
+        self.mpc: Optional[Planner] = None
+        self.msf: Optional[Planner] = None
         if planners and self.mode != "msf":
             from .mpc import MpcPlanner
 

@@ -57,7 +57,8 @@ def _raise_braking(u: np.ndarray, vX0: float, grid: PlanningGrid) -> bool:
 
 
 class MpcPlanner:
-    """The MPC planner of Sec. IV-B: one problem and solver built once, solved at every planning instant."""
+    """The MPC planner of Sec. IV-B (a :class:`moose.planner.Planner`): one problem and solver built once,
+    solved at every planning instant."""
 
     def __init__(self, params: MpcParams, grid: PlanningGrid) -> None:
         self.params = params
@@ -112,6 +113,10 @@ class MpcPlanner:
     def cost(self, inp: PlannerInput, u_normalised: np.ndarray) -> float:
         """𝒥 of eq. (jcaldef) (with the lane-keeping and speed-floor terms) for normalised (N_p, 2) inputs."""
         return self._solver.cost(np.asarray(u_normalised, dtype=float).reshape(-1), self.parameters(inp))
+
+    def reset(self) -> None:
+        """Nothing to forget: a plan depends on its input alone (the warm start comes in as
+        ``initial_guess``; the solver keeps no state between solves)."""
 
     def plan(self, inp: PlannerInput) -> PlanResult:
         """Solve eq. (planmpc) at one planning instant, from :meth:`initial_guess`.

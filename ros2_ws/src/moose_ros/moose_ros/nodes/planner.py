@@ -6,6 +6,7 @@ from typing import Any, Optional
 
 import numpy as np
 
+from moose.planner import Planner
 from moose.planner.step import new_obstacle
 from moose.planner.weight import WeightFunction
 from moose.signals import PlannerInput, StateEstimate, Threat
@@ -15,7 +16,7 @@ from ..graph import BLEND, PLANS, STATE, THREAT
 from .base import ERROR, OK, WARN, GraphNode
 
 
-class Planner(GraphNode):
+class PlannerNode(GraphNode):
     """MPC or MSF planner at the planning rate (5 Hz), and at once on a new obstacle, which restarts the
     planning period (:func:`moose.planner.step.new_obstacle`, as in the lockstep loop)."""
 
@@ -45,7 +46,8 @@ class Planner(GraphNode):
         self.report_stale(stale, ERROR, {BLEND.name: WARN})
         self.blocked = STATE.name in stale or THREAT.name in stale
 
-    def make_planner(self) -> Any:
+    def make_planner(self) -> Planner:
+        """The planner this node runs (built once, at start)."""
         raise NotImplementedError
 
     def on_threat(self, threat: Optional[Threat]) -> None:
@@ -85,7 +87,7 @@ class Planner(GraphNode):
         self.pub(cv.plan_to_msg(self.rt, t, self.kind, result, self.threat is not None))
 
 
-class MpcPlannerNode(Planner):
+class MpcPlannerNode(PlannerNode):
     """The MPC planner, warm-started from the last blend (/planning/blend)."""
 
     name, kind = "mpc_planner", "mpc"
@@ -94,18 +96,18 @@ class MpcPlannerNode(Planner):
         super().__init__(rt)
         self.subscribe(BLEND, lambda blend: setattr(self, "guess", WeightFunction.next_initial_guess(blend)))
 
-    def make_planner(self) -> Any:
+    def make_planner(self) -> Planner:
         from moose.planner.mpc import MpcPlanner
 
         return MpcPlanner(self.config.mpc, self.config.grid)
 
 
-class MsfPlannerNode(Planner):
+class MsfPlannerNode(PlannerNode):
     """The maximum-steering feed-forward planner (no initial guess)."""
 
     name, kind = "msf_planner", "msf"
 
-    def make_planner(self) -> Any:
+    def make_planner(self) -> Planner:
         from moose.planner.msf import MsfPlanner
 
         return MsfPlanner(self.config.msf, self.config.grid, self.table())
