@@ -12,11 +12,11 @@ from moose.maneuver import (
     integrate_y_max,
     lateral_steering_index,
     maneuver_profile,
-    time_to_collision,
 )
 from moose.paper import PAPER_EXPERIMENTS, PAPER_FRICTION, paper_y_max_fit
 from moose.params import ParamError, VehicleParams
 from moose.schema import ManeuverParams
+from moose.signals import time_to_collision
 from moose.tire import pacejka
 
 VEHICLE = VehicleParams(mu=PAPER_FRICTION)

@@ -26,9 +26,9 @@ from __future__ import annotations
 import math
 from typing import Optional, Sequence
 
-from .maneuver import MaxSteeringTable, lateral_steering_index, time_to_collision
+from .maneuver import MaxSteeringTable, lateral_steering_index
 from .schema import DetectorParams
-from .signals import Obstacle, StateEstimate, Threat
+from .signals import Obstacle, StateEstimate, Threat, time_to_collision
 
 
 def evasion_side(obstacle: Obstacle, y_path: float, side_tie: float) -> int:

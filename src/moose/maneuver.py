@@ -33,8 +33,6 @@ from .tire import pacejka
 
 ArrayLike = Union[float, np.ndarray]
 
-_EPS_V = 1e-9
-
 
 # --- integration of eq. (ymax) -----------------------------------------------------------------
 
@@ -341,17 +339,6 @@ class MaxSteeringTable:
 @lru_cache(maxsize=32)
 def _build_table(vehicle: VehicleParams, params: ManeuverParams) -> MaxSteeringTable:
     return MaxSteeringTable._integrate(vehicle, params)
-
-
-def time_to_collision(distance: float, vx: float) -> float:
-    """τ = distance / v_x (s), eq. (nudef)'s τ.
-
-    Negative once the near edge is behind the CoG; infinite when the car is not
-    closing in (v_x ≤ 0) on an obstacle ahead, 0 when it is not moving but already there.
-    """
-    if vx > _EPS_V:
-        return distance / vx
-    return math.inf if distance > 0.0 else 0.0
 
 
 def lateral_steering_index(w: float, tau: float, vx: float, table: MaxSteeringTable) -> float:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 from typing import Any, Literal
 
 import numpy as np
@@ -117,6 +118,17 @@ class Threat:
     """Evasion side: +1 to the left (positive y), -1 to the right."""
     y_path: float
     """Lateral position of the ego path the evasion starts from (m)."""
+
+
+def time_to_collision(distance: float, vx: float) -> float:
+    """τ = distance / v_x (s), eq. (nudef)'s τ (:attr:`Threat.tau`).
+
+    Negative once the near edge is behind the CoG; infinite when the car is not
+    closing in (v_x ≤ 0) on an obstacle ahead, 0 when it is not moving but already there.
+    """
+    if vx > 1e-9:
+        return distance / vx
+    return math.inf if distance > 0.0 else 0.0
 
 
 @dataclasses.dataclass(frozen=True)
