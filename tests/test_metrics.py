@@ -187,7 +187,7 @@ def test_smoothness_of_a_known_steering_signal() -> None:
 SUMMARY_KEYS = {
     "scenario", "planner", "seed", "outcome", "reason", "collided", "lost_control", "left_field", "complete",
     "passed_obstacle", "min_clearance_m", "max_abs_sideslip_rad", "max_abs_heading_rad", "verdict_limits",
-    "verdict_limits_default", "mu", "mu_planning",
+    "verdict_limits_default", "mu", "mu_planning", "timing",
     "tau_scenario_s", "tau_s", "nu", "w_m", "v_detect_mps", "paper_nu", "max_abs_steer_rad", "x_peak_steer_m",
     "max_lateral_offset_m", "final_lateral_offset_m", "min_speed_mps", "max_speed_mps", "mpc_solve_ms",
     "mpc_status_counts", "mean_weight_mpc", "duration_s", "steer_total_variation_rad", "time_at_steer_limit_s",
@@ -202,6 +202,8 @@ def test_the_summary_has_exactly_its_documented_fields() -> None:
     threat = Threat(t=1.0, obstacle=zone, tau=1.9, w=1.2, nu=0.4, side=1, y_path=0.0)
     assert set(summarize(hand_made(threat=threat))) == SUMMARY_KEYS
     assert set(summarize(hand_made())["mpc_solve_ms"]) == {"median", "p95", "max", "count"}
+    assert set(summarize(hand_made())["timing"]) == {"profile", "sensor_delay_s", "planning_delay_s",
+                                                     "command_delay_s", "compensate"}
 
 
 def test_a_detected_threat_fills_tau_nu_w_and_the_speed_at_detection() -> None:

@@ -168,7 +168,7 @@ def test_a_sweep_case_equals_moose_simulate(tmp_path: Path) -> None:
     out = tmp_path / "s"
     assert main(["sweep", "--speed", "6.5", "--tau", "2.2", "--nu", "0.45", "--mu", "paper", "--duration", "4",
                  "--planner", "combined", "--seeds", "2", "--set", "planning.N_p=12", "--set", "sensors.gps_lag_s=0.3",
-                 "--field-margin", "4", "-o", str(out), "--workers", "2", "--quiet"]) == 0
+                 "--field-margin", "4", "--timing", "car", "-o", str(out), "--workers", "2", "--quiet"]) == 0
     rows = rows_of(out)
     assert len(rows) == 2 and {r["input.seed"] for r in rows} == {0, 1}
     for row in rows:
@@ -178,13 +178,16 @@ def test_a_sweep_case_equals_moose_simulate(tmp_path: Path) -> None:
                      "--obstacle-length", repr(row["input.length_m"]), "--duration", repr(row["input.duration_s"]),
                      "--field-margin", repr(row["input.field_margin_m"]), "--mu", repr(row["input.mu"]),
                      "--planner", row["input.planner"], "--seed", str(row["input.seed"]),
-                     "--set", "planning.N_p=12", "--set", "sensors.gps_lag_s=0.3",
+                     "--set", "planning.N_p=12", "--set", "sensors.gps_lag_s=0.3", "--timing", "car",
                      "--json", str(summary_path), "--no-bag"]) == 0
         summary = json.loads(summary_path.read_text())
         compared = 0
         for key, value in summary.items():
             if key == "mpc_solve_ms":
                 assert row["mpc_solve_ms.count"] == value["count"]
+                continue
+            if key == "timing":  # the profile and every value, in columns of their own
+                assert {k: row[f"timing.{k}"] for k in value} == value and value["profile"] == "car"
                 continue
             recorded = row[key]
             if isinstance(value, (dict, list)):

@@ -13,6 +13,7 @@ from typing import Any, Optional
 import numpy as np
 
 from .simulation import SimulationResult
+from .timing import describe
 from .verdict import DEFAULT_PARAMS, finite_or_none, judge, limits_of
 
 
@@ -65,6 +66,7 @@ def summarize(result: SimulationResult) -> dict[str, Any]:
         "verdict_limits_default": config.verdict == DEFAULT_PARAMS,
         "mu": config.vehicle.mu,
         "mu_planning": config.mu_planning,
+        "timing": describe(config.timing),
         "tau_scenario_s": scenario.tau,
         "tau_s": first.tau if first is not None else None,
         "nu": first.nu if first is not None else None,

@@ -480,6 +480,31 @@ class SimulationParams:
 
 
 @dataclasses.dataclass(frozen=True)
+class TimingParams:
+    """The car's latency chain (s): what the lockstep loop and the node graph delay, and whether the stack
+    compensates it (:mod:`moose.timing`; docs/design.md, "Closed loop and rates").
+
+    Each delay is a whole number of motion-control periods (checked by :class:`Config`).  The defaults are the
+    ``ideal`` profile (all zero); ``car`` (:func:`moose.timing.profile`) is the FPEV2-Kanon's chain, from the CAN
+    periods of config/kanon.dbc and the planning computer's solve time."""
+
+    sensor_delay_s: float = 0.0
+    """d_s: a sample handed over by the sensors at t reaches the observer at t + d_s (stamped t)."""
+    planning_delay_s: float = 0.0
+    """d_p: the plan of the instant t acts from t + d_p (the previous plan until then); also the simulated
+    compute time the MPC's ``time_budget_s`` is checked against in lockstep."""
+    command_delay_s: float = 0.0
+    """d_c: a command computed at t acts on the actuators from t + d_c (CAN frame period and phase included)."""
+    compensate: bool = False
+    """The planners and the FBL predict the state forward over the known latency before they plan or command."""
+
+    def __post_init__(self) -> None:
+        for name in ("sensor_delay_s", "planning_delay_s", "command_delay_s"):
+            check(name, getattr(self, name), lambda v: 0.0 <= v <= 2.0, "a delay in [0, 2] s")
+        check("compensate", self.compensate, lambda v: isinstance(v, bool), "true or false")
+
+
+@dataclasses.dataclass(frozen=True)
 class Config:
     """Every block's parameters."""
 
@@ -497,12 +522,19 @@ class Config:
     minimum_risk: MinimumRiskParams = MinimumRiskParams()
     simulation: SimulationParams = SimulationParams()
     verdict: VerdictParams = VerdictParams()
+    timing: TimingParams = TimingParams()
 
     def __post_init__(self) -> None:
         motion_period = 1.0 / self.simulation.motion_rate_hz
         if not _divides(self.planning.t_s, motion_period):
             raise ParamError(f"planning.t_s = {self.planning.t_s!r} is invalid: expected a multiple of the "
                              f"motion-control period 1 / simulation.motion_rate_hz = {motion_period!r} s")
+        for name in ("sensor_delay_s", "planning_delay_s", "command_delay_s"):
+            value = getattr(self.timing, name)
+            if not (value == 0.0 or _divides(value, motion_period)):
+                raise ParamError(f"timing.{name} = {value!r} is invalid: expected a whole number of motion-control "
+                                 f"periods 1 / simulation.motion_rate_hz = {motion_period!r} s (the resolution of "
+                                 "every delay)")
 
     @property
     def mu_planning(self) -> float:
@@ -526,6 +558,12 @@ class Config:
     def planning_rate_hz(self) -> float:
         """The planning rate 1 / t_s (Hz)."""
         return 1.0 / self.planning.t_s
+
+    @property
+    def motion_period(self) -> float:
+        """The motion-control period 1 / ``simulation.motion_rate_hz`` (s): the tick of the lockstep loop and the
+        resolution of every delay of ``timing``."""
+        return 1.0 / self.simulation.motion_rate_hz
 
     @property
     def motion_steps_per_plan(self) -> int:

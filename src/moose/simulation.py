@@ -5,16 +5,19 @@ observer, detector and motion control run at 100 Hz (GPS at 1 Hz with its lag);
 MPC, MSF, the weight function and the FBL run every t_s = 0.2 s (5 Hz, the
 MicroLabBox's rate; :class:`moose.planner.step.PlanningStep`), and re-plan at once
 when the detector reports a new obstacle (the planning period restarts there).
-Each planning instant uses the estimate of that instant and its result acts from
-that motion tick on (zero compute latency in lockstep; the node graph has the
-real one).  All randomness comes from one seeded generator, so a run is a
-function of (configuration, scenario, planner mode, seed) — except a planning
-step whose wall-clock solve time exceeds the MPC's time budget, which is then
-reported ``over_budget``.
+Each planning instant uses the estimate of that instant.  The car's latency chain
+(``timing``, :mod:`moose.timing`) is applied where the car has it: the samples
+reach the observer ``sensor_delay_s`` after the sensors hand them over, a plan acts
+``planning_delay_s`` after its instant (inside the planning step), and a command
+acts on the actuators ``command_delay_s`` after it was computed.  All randomness
+comes from one seeded generator and no step reads the wall clock (the MPC's budget
+is charged the planning delay), so a run is a function of (configuration,
+scenario, planner mode, seed).
 """
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Optional
 
 import numpy as np
@@ -28,6 +31,7 @@ from .scenario import Scenario
 from .schema import Config, PlannerMode
 from .sensors import Sensors
 from .signals import EpsSample, Obstacle, Reference, StateEstimate, Threat
+from .timing import CommandHold, DelayLine, SteeringPredictor
 from .vehicle import VehiclePlant, initial_state
 
 TRACE_FIELDS = (
@@ -58,14 +62,6 @@ class SimulationResult:
     """The observer's estimate at each motion tick."""
     threats: list = dataclasses.field(default_factory=list)
     """(t, threat or None) at each motion tick."""
-
-
-@dataclasses.dataclass
-class _Row:
-    delta_ref: float = 0.0
-    delta_mpc: float = 0.0
-    vx_ref: float = 0.0
-    weight_mpc: float = float("nan")
 
 
 class ClosedLoop:
@@ -103,8 +99,8 @@ class ClosedLoop:
         self.observer = StateObserver(config.observer, model, initial=_estimate_of(0.0, x0))
 
     def run(self) -> SimulationResult:
-        sim = self.config.simulation
-        dt_motion = 1.0 / sim.motion_rate_hz
+        sim, timing = self.config.simulation, self.config.timing
+        dt_motion = self.config.motion_period
         end_time = self.scenario.lead_time + self.scenario.duration
         n_motion = int(round(end_time * sim.motion_rate_hz))
         rows: list[tuple[float, ...]] = []
@@ -112,17 +108,24 @@ class ClosedLoop:
         appeared = False
         first_threat: Optional[Threat] = None
         reference = Reference(delta=0.0, vx=self.scenario.v_init)
-        row = _Row(vx_ref=self.scenario.v_init)
-        delta_meas = 0.0
+        delta_meas, delta_stamp = 0.0, 0.0
         u = np.zeros(3)
         threat: Optional[Threat] = None
         next_plan = 0
         samples: list = []
         estimates: list = []
         threats: list = []
+        # the world's side of the latency chain: sensors → observer, commands → actuators (moose.timing)
+        in_transit: DelayLine = DelayLine(timing.sensor_delay_s, dt_motion)
+        actuators: CommandHold[np.ndarray] = CommandHold(timing.command_delay_s, dt_motion)
+        vehicle = self.config.vehicle
+        eps = (SteeringPredictor(timing.command_delay_s, dt_motion, vehicle.delta_max, vehicle.delta_rate_max)
+               if timing.compensate else None)
         # the blocks' methods, looked up once (the loop runs 100 times per simulated second)
         plant, observe, sense, detect = self.plant, self.observer.update_all, self.sensors.sample, self.detector.update
-        estimate_now, between, control = self.observer.estimate, self.step.reference_between, self.motion.step
+        estimate_now, reference_at, control = self.observer.estimate, self.step.reference_at, self.motion.step
+        send, receive, actuate, act = in_transit.push, in_transit.pop_due, actuators.push, actuators.acting
+        step = self.step
         steps_per_motion, steps_per_plan = sim.plant_steps_per_motion, self.config.motion_steps_per_plan
         seen: list[Obstacle] = [self.scenario.danger_zone]
         unseen: list[Obstacle] = []
@@ -130,12 +133,14 @@ class ClosedLoop:
             t = k * dt_motion
             state = plant.state
             specific_force = plant.specific_force if k else plant.imu_specific_force(state, u)
-            delivered = sense(t, state, specific_force)
+            for sample in sense(t, state, specific_force):
+                send(t, sample)
+            delivered = receive(t)
             samples.extend(delivered)
             observe(delivered)
             for sample in delivered:
                 if type(sample) is EpsSample:
-                    delta_meas = sample.delta
+                    delta_meas, delta_stamp = sample.delta, sample.t
             estimate = estimate_now()
             estimates.append(estimate)
             true = state.tolist()
@@ -149,18 +154,21 @@ class ClosedLoop:
             if k >= next_plan or replan:
                 next_plan = k + steps_per_plan
                 v_des = self.scenario.desired_speed(first_threat is not None)
-                record = self.step.plan(t, estimate, threat, v_des)
-                planning.append(record)
-                reference = record.reference
-                row = _Row(reference.delta, record.delta_mpc, reference.vx, record.blend.weight_mpc)
-            else:
-                reference = between(estimate) or reference
-                row.delta_ref = reference.delta
-            u = control(reference, estimate, delta_meas, dt_motion)
+                planning.append(step.plan(t, estimate, threat, v_des))
+            reference = reference_at(t, estimate) or reference
+            acting = step.acting
+            if eps is None:
+                command = control(reference, estimate, delta_meas, dt_motion)
+            else:  # the EPS loop closes on the angle its command will meet (timing.compensate)
+                command = control(reference, estimate, eps.predict(delta_meas, delta_stamp, t), dt_motion)
+                eps.record(t, float(command[0]))
+            actuate(t, command)
+            u = act(t)
             rows.append((
                 t, *true[:6], true[8], true[6], true[7],
                 estimate.x, estimate.y, estimate.theta, estimate.vx, estimate.vy, estimate.gamma,
-                row.delta_ref, row.delta_mpc, row.vx_ref, row.weight_mpc, *u.tolist(), float(threat is not None),
+                reference.delta, acting.delta_mpc if acting is not None else 0.0, reference.vx,
+                acting.blend.weight_mpc if acting is not None else math.nan, *u.tolist(), float(threat is not None),
             ))
             if k < n_motion:
                 plant.step(u, steps_per_motion)

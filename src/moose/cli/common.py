@@ -9,6 +9,7 @@ from typing import Any, Optional, Sequence
 
 from ..params import ParamError
 from ..schema import PLANNER_MODES
+from ..timing import PROFILES
 
 DEFAULT_SCENARIO = "paper_v7_tau1.4"
 """The paper's extreme case (7 m/s, τ = 1.4 s, ν ≈ 0.95): the main job."""
@@ -214,6 +215,53 @@ def scenario_from_args(args: Any) -> Any:
     if args.mu is not None:
         changes["mu"] = args.mu
     return dataclasses.replace(scenario, **changes) if changes else scenario
+
+
+def add_timing_argument(parser: Any) -> None:
+    """``--timing PROFILE``: the latency chain of ``simulate``, ``sweep`` and ``reproduce``."""
+    parser.add_argument("--timing", choices=PROFILES,
+                        help="the latency chain: ideal (none) or car (the FPEV2-Kanon's, from config/kanon.dbc); "
+                             "replaces the configuration's timing delays (docs/design.md, 'Closed loop and rates'); "
+                             "--set timing.KEY=VALUE changes one of them after it")
+
+
+def with_timing(config: Any, args: Any) -> Any:
+    """``config`` with the delays of ``--timing`` (its ``compensate`` kept), or unchanged without the flag."""
+    import dataclasses
+
+    from ..timing import profile
+
+    if getattr(args, "timing", None) is None:
+        return config
+    return dataclasses.replace(config, timing=profile(args.timing, config.timing.compensate))
+
+
+def run_config(args: Any, reader: str) -> Any:
+    """The configuration of a run of the command ``reader``: ``--config`` (or the shipped file), then ``--timing``,
+    then every ``--set``, then ``--mu-estimate``."""
+    from ..config import load_config, with_overrides
+
+    config = with_timing(load_config(args.config, reader), args)
+    settings = getattr(args, "set", None)
+    if settings:
+        config = with_overrides(config, parse_settings(settings))
+    return configure(config, args)
+
+
+def parse_settings(items: list[str]) -> dict[str, Any]:
+    """``GROUP.KEY=VALUE`` items as a mapping (values are YAML scalars: numbers, true/false, names)."""
+    import yaml
+
+    settings: dict[str, Any] = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        if not sep or not key.strip():
+            raise ParamError(f"--set {item!r} is invalid: expected GROUP.KEY=VALUE")
+        try:
+            settings[key.strip()] = yaml.safe_load(text)
+        except yaml.YAMLError:
+            settings[key.strip()] = text
+    return settings
 
 
 def configure(config: Any, args: Any) -> Any:

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from ..params import ParamError
-from .common import non_negative_int
+from .common import add_timing_argument, non_negative_int, run_config
 
 
 def add_subparser(subparsers: Any) -> None:
@@ -23,6 +23,9 @@ def add_subparser(subparsers: Any) -> None:
                         help="regenerate the generated blocks this file holds (calibration, results, claims, summary: "
                              "docs/design.md, README.md); may be given more than once")
     parser.add_argument("--json", help="write every run's summary as JSON to this path")
+    parser.add_argument("--set", action="append", default=[], metavar="GROUP.KEY=VALUE",
+                        help="change one parameter of the configuration, e.g. timing.compensate=true (repeatable)")
+    add_timing_argument(parser)
     parser.set_defaults(func=cmd_reproduce)
 
 
@@ -31,7 +34,6 @@ GENERATED = ("calibration", "results", "claims", "summary")
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
-    from ..config import load_config
     from ..reproduce import (
         blocks_in,
         claims,
@@ -52,7 +54,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
                              f"({', '.join(GENERATED)})")
     if args.json is not None and not Path(args.json).parent.is_dir():
         raise ParamError(f"--json = {args.json!r} is invalid: no folder {str(Path(args.json).parent)!r}")
-    config = load_config(args.config, "moose reproduce")
+    config = run_config(args, "moose reproduce")
     runs = run_all(config, seed=args.seed, progress=lambda what: print(f"  {what}", file=sys.stderr, flush=True))
     found = claims(runs, config.mpc.solver, config.vehicle.delta_max)
     print(render_claims(found))

@@ -19,11 +19,12 @@ from ..params import ParamError
 from .common import (
     INTERRUPTS,
     add_scenario_arguments,
+    add_timing_argument,
     check_output_dir,
     check_output_file,
-    configure,
     outcome_exit_status,
     plot_suffixes,
+    run_config,
     run_folder,
     scenario_from_args,
 )
@@ -39,6 +40,7 @@ def add_subparser(subparsers: Any) -> None:
     simulate.add_argument("--no-bag", action="store_true", help="do not record a bag")
     simulate.add_argument("--set", action="append", default=[], metavar="GROUP.KEY=VALUE",
                           help="change one parameter of the configuration, e.g. planning.N_p=20 (repeatable)")
+    add_timing_argument(simulate)
     simulate.set_defaults(func=cmd_simulate)
 
 
@@ -62,8 +64,15 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"MPC solves      {solve['count']}  median {_fmt(solve['median'])} ms, p95 {_fmt(solve['p95'])} ms,"
         f" max {_fmt(solve['max'])} ms  statuses {summary['mpc_status_counts']}",
         f"mean w_MPC      {_fmt(summary['mean_weight_mpc'])} (over steps with a threat)",
+        f"timing          {format_timing(summary['timing'])}",
     ]
     return "\n".join(lines)
+
+
+def format_timing(timing: dict[str, Any]) -> str:
+    """A summary's timing in one line: the profile and every delay in ms."""
+    delays = ", ".join(f"{name} {timing[f'{name}_delay_s'] * 1e3:.0f} ms" for name in ("sensor", "planning", "command"))
+    return f"{timing['profile']} ({delays}; compensation {'on' if timing['compensate'] else 'off'})"
 
 
 def _fmt(value: Any, spec: str = ".3g") -> str:
@@ -84,34 +93,14 @@ def bag_recorder(args: argparse.Namespace) -> Optional[Callable[[Any, Path], Any
     return record
 
 
-def parse_settings(items: list[str]) -> dict[str, Any]:
-    """``GROUP.KEY=VALUE`` items as a mapping (values are YAML scalars: numbers, true/false, names)."""
-    import yaml
-
-    settings: dict[str, Any] = {}
-    for item in items:
-        key, sep, text = item.partition("=")
-        if not sep or not key.strip():
-            raise ParamError(f"--set {item!r} is invalid: expected GROUP.KEY=VALUE")
-        try:
-            settings[key.strip()] = yaml.safe_load(text)
-        except yaml.YAMLError:
-            settings[key.strip()] = text
-    return settings
-
-
 def cmd_simulate(args: argparse.Namespace) -> int:
-    from ..config import load_config, with_overrides
     from ..metrics import summarize
     from ..plots import plot_result
     from ..simulation import simulate
 
     record = bag_recorder(args)
     scenario = scenario_from_args(args)
-    config = load_config(args.config, "moose simulate")
-    if args.set:
-        config = with_overrides(config, parse_settings(args.set))
-    config = configure(config, args)
+    config = run_config(args, "moose simulate")
     # every output is checked before the run, so none of them is lost at its end
     json_path = check_output_file("--json", args.json)
     plot_path = check_output_file("--plot", args.plot, plot_suffixes()) if args.plot is not None else None

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from ..params import ParamError
-from .common import positive_float
+from .common import add_timing_argument, positive_float, with_timing
 
 EXAMPLE = ("moose sweep --speed 4:8:1 --tau 1:5:0.5 --nu 0.1:1.0:0.1 --mu paper,0.8 "
            "--planner combined,mpc,msf -o runs/paper_region")
@@ -47,6 +47,7 @@ def add_subparser(subparsers: Any) -> None:
     axes.add_argument("--set", action="append", default=[], metavar="GROUP.KEY=VALUES",
                       help="a parameter of config/moose.yaml as an axis, e.g. planning.N_p=10,20 or "
                            "sensors.gps_lag_s=0:0.6:0.2 (repeatable)")
+    add_timing_argument(axes)
     sampling = sweep.add_argument_group("sampling")
     sampling.add_argument("--samples", type=int, help="draw N points of the open ranges LO:HI (default: full grid)")
     sampling.add_argument("--sampling", choices=["lhs", "random"], default="lhs",
@@ -100,7 +101,7 @@ def _axes(args: argparse.Namespace) -> list[Any]:
 
 
 AXIS_OPTIONS = ("speed", "tau", "obstacle_half_width", "nu", "mu", "planner", "obstacle_length", "duration",
-                "field_margin", "samples", "output", "config", "address", "workers", "backend")
+                "field_margin", "samples", "output", "config", "address", "workers", "backend", "timing")
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
@@ -122,8 +123,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from ..sweep.store import RunFolder, pyarrow_or_error
 
     pyarrow_or_error()
-    spec = SweepSpec(tuple(_axes(args)), load_config(args.config, "moose sweep"), samples=args.samples,
-                     sampling=args.sampling, sampling_seed=args.sampling_seed)
+    config = with_timing(load_config(args.config, "moose sweep"), args)
+    spec = SweepSpec(tuple(_axes(args)), config, samples=args.samples, sampling=args.sampling,
+                     sampling_seed=args.sampling_seed)
     if args.mu is not None and ":" in args.mu and args.mu.count(":") == 1:
         print("moose: warning: a sampled --mu builds a maneuver table (about 0.4 s) for every distinct mu, in this "
               "process for --nu and in every worker; a list of frictions is much faster", file=sys.stderr)

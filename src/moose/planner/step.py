@@ -12,6 +12,11 @@ node graph reproduces the lockstep loop by construction, not by care.
 * The blended first acceleration goes to the FBL (δ*, v_x*); between planning instants δ* is
   re-evaluated at the motion-control rate on the held acceleration with the newest estimate
   (``simulation.steering_fbl_at_motion_rate``), v_x* is held.
+* Timing (:mod:`moose.timing`): the plan of the instant t acts from t + ``timing.planning_delay_s``
+  (the previous plan's held acceleration until then), and in lockstep the MPC's budget is charged
+  that delay, never the wall clock.  With ``timing.compensate`` the planners plan from the state
+  predicted to t + d_p + d_c, when their first acceleration reaches the car, and the FBL commands
+  from the state predicted to now + d_c, when its command acts (:func:`moose.timing.predict`).
 * The blend shifted by one step is the MPC's next initial guess (Fig. 3, dashed arrow).
 * Re-plan trigger (:func:`new_obstacle`): a threat from an obstacle that was not the threat at the
   previous tick re-plans at once and restarts the planning period.
@@ -25,6 +30,7 @@ import numpy as np
 
 from ..schema import Config, PlannerMode
 from ..signals import Blend, PlannerInput, PlanResult, Reference, StateEstimate, Threat
+from ..timing import AccelSchedule, DelayLine, compensated_input, predict
 from . import Planner
 from .fbl import FeedbackLinearization
 from .kinematics import kinematic_rollout
@@ -80,34 +86,43 @@ class PlanningStep:
         if planners and self.mode != "msf":
             from .mpc import MpcPlanner
 
-            self.mpc = MpcPlanner(config.mpc, self.grid)
+            self.mpc = MpcPlanner(config.mpc, self.grid, compute_time_s=config.timing.planning_delay_s)
         if planners and self.mode != "mpc":
             from ..maneuver import MaxSteeringTable
             from .msf import MsfPlanner
 
             self.msf = MsfPlanner(config.msf, self.grid, table or MaxSteeringTable.build(model, config.maneuver))
         self.fbl_at_motion_rate = config.simulation.steering_fbl_at_motion_rate
+        self.timing = config.timing
+        self._plans: DelayLine[PlanningRecord] = DelayLine(self.timing.planning_delay_s, config.motion_period)
+        self._in_flight = AccelSchedule()
+        """The blends' first accelerations from when they reach the car (t + d_p + d_c): what compensation predicts
+        with."""
         self.guess: Optional[np.ndarray] = None
         """(N_p, 2) initial guess of the next MPC solve: the last blend shifted by one step."""
-        self.applied: Optional[np.ndarray] = None
-        """The blended first acceleration [v̇_X*, v̇_Y*] held until the next planning instant."""
-        self.reference: Optional[Reference] = None
-        """The FBL reference of the last planning instant."""
+        self.acting: Optional[PlanningRecord] = None
+        """The plan acting now (the latest whose planning delay has passed), None before the first."""
 
     def planner_input(self, t: float, estimate: StateEstimate, threat: Optional[Threat], v_des: float) -> PlannerInput:
-        """What both planners receive at ``t`` (the MPC's guess is the shifted previous blend)."""
-        return PlannerInput(t=t, estimate=estimate, threat=threat, v_des=v_des, initial_guess=self.guess, y_lane=0.0)
+        """What both planners receive at ``t`` (the MPC's guess is the shifted previous blend); with
+        ``timing.compensate`` predicted to t + d_p + d_c (:func:`moose.timing.compensated_input`)."""
+        inp = PlannerInput(t=t, estimate=estimate, threat=threat, v_des=v_des, initial_guess=self.guess, y_lane=0.0)
+        if not self.timing.compensate:
+            return inp
+        return compensated_input(inp, t + self.timing.planning_delay_s + self.timing.command_delay_s, self._in_flight)
 
     def plan(self, t: float, estimate: StateEstimate, threat: Optional[Threat], v_des: float) -> PlanningRecord:
         """Run the mode's planners at ``t`` and :meth:`combine` their plans."""
         inp = self.planner_input(t, estimate, threat, v_des)
         mpc = self.mpc.plan(inp) if self.mpc is not None else None
         msf = self.msf.plan(inp) if self.msf is not None else None
-        return self.combine(t, estimate, threat, mpc, msf)
+        return self.combine(t, inp.estimate, inp.threat, mpc, msf)
 
     def combine(self, t: float, estimate: StateEstimate, threat: Optional[Threat], mpc: Optional[PlanResult],
                 msf: Optional[PlanResult]) -> PlanningRecord:
-        """The blend of the mode, the FBL reference and the next initial guess from the plans of one instant.
+        """The blend of the mode, the FBL reference and the next initial guess from the plans of one instant
+        (``estimate`` and ``threat`` as the planners had them, :meth:`planner_input`); the plan acts from
+        t + ``timing.planning_delay_s`` (:meth:`reference_at`).
 
         ``combined`` needs one plan: without an MPC plan it blends with weight 0, without an MSF plan it
         applies the MPC plan (weight 1: the other planner is dead or silent).  ``mpc`` and ``msf`` need
@@ -126,15 +141,23 @@ class PlanningStep:
         reference = self.fbl.reference(blend.accel[0], estimate)
         delta_mpc = self.fbl.steering(mpc.accel[0], estimate) if mpc is not None else float("nan")
         self.guess = self.weight.next_initial_guess(blend)
-        self.applied = blend.accel[0]
-        self.reference = reference
-        return PlanningRecord(t, threat, mpc, msf, blend, reference, delta_mpc)
+        record = PlanningRecord(t, threat, mpc, msf, blend, reference, delta_mpc)
+        self._plans.push(t, record)
+        self._in_flight.add(t + self.timing.planning_delay_s + self.timing.command_delay_s, blend.accel[0])
+        return record
 
-    def reference_between(self, estimate: StateEstimate) -> Optional[Reference]:
-        """The reference between planning instants: δ* of the held acceleration at ``estimate`` (when
-        ``steering_fbl_at_motion_rate``), v_x* of the last instant; None before the first plan."""
-        if self.applied is None or self.reference is None:
+    def reference_at(self, t: float, estimate: StateEstimate) -> Optional[Reference]:
+        """The FBL reference at ``t``: the plans due by ``t`` take over (:attr:`acting`); δ* of the acting plan's
+        first acceleration at ``estimate`` (when ``steering_fbl_at_motion_rate``; with ``timing.compensate`` at the
+        estimate predicted to t + d_c), v_x* of that plan; None before the first plan acts."""
+        due = self._plans.pop_due(t)
+        if due:
+            self.acting = due[-1]
+        acting = self.acting
+        if acting is None:
             return None
         if not self.fbl_at_motion_rate:
-            return self.reference
-        return Reference(delta=self.fbl.steering(self.applied, estimate), vx=self.reference.vx)
+            return acting.reference
+        if self.timing.compensate:
+            estimate = predict(estimate, t + self.timing.command_delay_s, self._in_flight)
+        return Reference(delta=self.fbl.steering(acting.blend.accel[0], estimate), vx=acting.reference.vx)

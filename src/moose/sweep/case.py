@@ -5,8 +5,8 @@ A case runs exactly what ``moose simulate`` runs for the same inputs
 --field-margin M --mu MU --planner P --seed S`` with the ``--set`` parameters): the same scenario from
 :func:`moose.scenario.adhoc_scenario`, the same :func:`moose.simulation.simulate` and
 :func:`moose.metrics.summarize`.  The row is the case's inputs (``input.*``, ``set.*``), the whole
-summary (nested fields flattened with dots, ``mpc_solve_ms.median``; the status counts and notes
-as JSON text), and how the case ran: ``status`` (:data:`STATUSES`), ``error``, ``wall_s``, ``worker``
+summary (nested fields flattened with dots, ``mpc_solve_ms.median``, ``timing.profile``; the status
+counts and notes as JSON text), and how the case ran: ``status`` (:data:`STATUSES`), ``error``, ``wall_s``, ``worker``
 (host:pid) and ``worker_max_rss_mb`` (the worker's peak resident memory so far).
 
 A case that raises is recorded with its traceback; one that runs longer than its time limit is
@@ -60,10 +60,11 @@ def case_scenario(case: Case) -> Any:
 
 
 def flatten(summary: dict[str, Any]) -> dict[str, Any]:
-    """A run summary as row columns: nested numbers with dotted names, mappings of counts and notes as JSON."""
+    """A run summary as row columns: the solve times and the timing with dotted names, mappings of counts and notes
+    as JSON."""
     row: dict[str, Any] = {}
     for key, value in summary.items():
-        if key == "mpc_solve_ms":
+        if key in ("mpc_solve_ms", "timing"):
             row.update({f"{key}.{k}": v for k, v in value.items()})
         elif isinstance(value, (dict, list)):
             row[key] = json.dumps(value, sort_keys=True)

@@ -11,12 +11,14 @@ from __future__ import annotations
 import math
 import time
 from functools import lru_cache
+from typing import Optional
 
 import casadi as ca
 import numpy as np
 
 from ...schema import MpcParams, PlanningGrid
 from ...signals import PlannerInput, PlanResult, PlanStatus
+from ...timing import over_budget
 from ..kinematics import kinematic_rollout
 from . import solver as solvers
 from .cost import P_VX, build_problem, epsilon, speed_floor
@@ -60,10 +62,14 @@ class MpcPlanner:
     """The MPC planner of Sec. IV-B (a :class:`moose.planner.Planner`): one problem and solver built once,
     solved at every planning instant."""
 
-    def __init__(self, params: MpcParams, grid: PlanningGrid) -> None:
+    def __init__(self, params: MpcParams, grid: PlanningGrid, compute_time_s: Optional[float] = None) -> None:
         self.params = params
         self.grid = grid
         """Horizon, sampling time, input bounds and planning μ (shared with the MSF planner)."""
+        self.compute_time_s = compute_time_s
+        """What a solve is charged against ``time_budget_s`` (:func:`moose.timing.over_budget`): in lockstep the
+        timing model's compute time (``timing.planning_delay_s``), so that no outcome depends on the machine's
+        speed; ``None`` (a real-time run) charges the measured wall time."""
         self._solver = _build(params, grid.N_p, grid.t_s)
 
     @property
@@ -124,6 +130,8 @@ class MpcPlanner:
         The result is never costlier than the start: with a capped line search an SQP may
         accept an increasing step, and the start is then the best point known.  A non-finite
         problem or solver failure returns the start with status ``failed`` and cost ``inf``.
+        A solve over ``time_budget_s`` (:attr:`compute_time_s`) is ``over_budget``; ``solve_time_s`` is the wall
+        time either way.
         """
         p = self.parameters(inp)
         guess = self.initial_guess(inp)
@@ -140,7 +148,8 @@ class MpcPlanner:
                     f = self._solver.cost(solution.ravel(), p)
                 solution, cost = (guess, result.f_start) if result.f_start < f else (solution, f)
         elapsed = time.perf_counter() - start
-        if status != "failed" and elapsed > self.params.time_budget_s:
+        if status != "failed" and over_budget(elapsed if self.compute_time_s is None else self.compute_time_s,
+                                              self.params.time_budget_s):
             status = "over_budget"
         accel = solution * self.scale
         est = inp.estimate

@@ -105,7 +105,9 @@ class WeightFbl(GraphNode):
         self.blended = t
         self.values = {"weight_mpc": f"{record.blend.weight_mpc:.3f}", "planners": ",".join(self.live)}
         self.pub_blend(cv.blend_to_msg(self.rt, t, record.blend, record.reference, record.delta_mpc))
-        self.pub_ref(cv.reference_to_msg(self.rt, t, record.reference))
+        reference = self.step.reference_at(t, self.estimate)  # the plan acts from t + timing.planning_delay_s
+        if reference is not None:
+            self.pub_ref(cv.reference_to_msg(self.rt, t, reference))
         self.pub_markers(cv.markers_to_msg(self.rt, t, record.threat, record.mpc, record.msf,
                                            blend_path(record.blend, self.estimate, self.step.grid.t_s)))
 
@@ -113,6 +115,6 @@ class WeightFbl(GraphNode):
         self.estimate = estimate
         if self.pending:
             self.try_blend()
-        reference = self.step.reference_between(self.estimate)
+        reference = self.step.reference_at(self.estimate.t, self.estimate)
         if reference is not None and not self.blocked:  # per estimate (the topic's designed rate)
             self.pub_ref(cv.reference_to_msg(self.rt, self.estimate.t, reference))
