@@ -2,11 +2,13 @@
 configurations."""
 from __future__ import annotations
 
+import dataclasses
+
 from hypothesis import strategies as st
 
 from moose.canbus.safety import GuardParams
 from moose.params import VEHICLE_LIMITS
-from moose.schema import MinimumRiskParams
+from moose.schema import MINIMUM_RISK_BOUNDS, MinimumRiskParams
 
 DT = 0.01
 
@@ -21,7 +23,8 @@ clock_step = st.one_of(st.just(DT), st.floats(0.0, 0.03), st.sampled_from([1.0, 
 
 @st.composite
 def hostile_guard_params(draw: st.DrawFn, timeout_min: float = 0.02) -> GuardParams:
-    """Any guard configuration that passes validation (limits anywhere in (0, hard limit])."""
+    """Any guard configuration that passes validation (limits anywhere in (0, hard limit], the maneuver anywhere
+    within its hard bounds)."""
 
     def share(bound: float) -> float:
         return draw(st.floats(1e-6, 1.0)) * bound
@@ -29,7 +32,7 @@ def hostile_guard_params(draw: st.DrawFn, timeout_min: float = 0.02) -> GuardPar
     return GuardParams(
         delta_max=share(VEHICLE_LIMITS.delta_max), steer_rate_limit=share(VEHICLE_LIMITS.delta_rate_max),
         torque_max=share(VEHICLE_LIMITS.T_max), torque_rate_limit=share(VEHICLE_LIMITS.torque_rate_max),
-        timeout=draw(st.floats(timeout_min, 0.05)), maneuver=MinimumRiskParams(
-            brake_fraction=draw(st.floats(1e-6, 1.0)), brake_gain=draw(st.floats(1e-6, 1e9)),
-            stop_speed=draw(st.floats(1e-6, 1e3)), stop_time=draw(st.floats(1e-6, 10.0)),
-            eps_gain=draw(st.floats(1e-6, 1e9))))
+        timeout=draw(st.floats(timeout_min, 0.05)), maneuver=MinimumRiskParams(**{
+            f.name: draw(st.floats(max(low, 1e-6), high))
+            for f in dataclasses.fields(MinimumRiskParams)
+            for low, high in [getattr(MINIMUM_RISK_BOUNDS, f.name)]}))

@@ -15,7 +15,19 @@ from pathlib import Path
 import pytest
 
 from isolation import claim_udp_port
-from moose_ros.faults import MATRIX_BEGIN, MATRIX_END, MATRIX_GRAPHS, Fault, matrix_cases, run_case
+from moose_ros.faults import (
+    MATRIX_BEGIN,
+    MATRIX_END,
+    MATRIX_GRAPHS,
+    WEAKEST_BEGIN,
+    WEAKEST_CASES,
+    WEAKEST_DURATION,
+    WEAKEST_END,
+    Fault,
+    matrix_cases,
+    run_case,
+    weakest_parameters,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 RATE = float(os.environ.get("MOOSE_FAULT_RATE", "1.0"))
@@ -62,9 +74,30 @@ def test_fault(graph: str, fault: Fault, can_bus: dict[str, object]) -> None:
         assert summary["node_exits"][fault.node] == 0  # it resumed and ended normally
 
 
+@pytest.mark.graph
+@pytest.mark.slow
+@pytest.mark.realtime
+@pytest.mark.parametrize("graph, fault", WEAKEST_CASES, ids=[f"{g}-{f.node}-{f.action}" for g, f in WEAKEST_CASES])
+def test_the_weakest_accepted_maneuver_still_stops_the_car(graph: str, fault: Fault,
+                                                          can_bus: dict[str, object]) -> None:
+    """The probe's hostile file (``stop_speed`` and ``straight_tolerance`` of 1000) is refused now; the most
+    permissive one accepted must still stop the car inside the field when the stack is killed."""
+    params = {**(can_bus if graph == "can" else {}), **weakest_parameters()}
+    summary = run_case(graph, fault, rate=RATE, params=params, duration=WEAKEST_DURATION)
+    log = summary["log"][-4000:]
+    assert summary["outcome"] in ("clear", "stopped_short"), f"{summary['outcome']}: {summary['reason']}\n{log}"
+    assert not summary["left_field"] and not summary["collided"] and not summary["lost_control"]
+    assert "minimum_risk" in {i["kind"] for i in summary["incidents"]}
+    assert summary["final_speed_mps"] < 0.1, summary["final_speed_mps"]
+
+
 def test_docs_carry_the_generated_matrix() -> None:
     design = (ROOT / "docs" / "design.md").read_text(encoding="utf-8")
     assert MATRIX_BEGIN in design and MATRIX_END in design
     table = design.split(MATRIX_BEGIN, 1)[1].split(MATRIX_END, 1)[0]
     rows = re.findall(r"^\| (full|can) \| (\w+) \| (kill|stall) \|", table, re.M)
     assert sorted(rows) == sorted((g, f.node, f.action) for g, f in CASES)
+    assert WEAKEST_BEGIN in design and WEAKEST_END in design
+    weakest = design.split(WEAKEST_BEGIN, 1)[1].split(WEAKEST_END, 1)[0]
+    rows = re.findall(r"^\| (full|can) \| (\w+) \| (kill|stall) \|", weakest, re.M)
+    assert sorted(rows) == sorted((g, f.node, f.action) for g, f in WEAKEST_CASES)

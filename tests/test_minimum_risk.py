@@ -2,7 +2,11 @@
 I/O and the motion controller run it; against the plant it steers back to straight and stops."""
 from __future__ import annotations
 
+import dataclasses
 import inspect
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,8 +14,8 @@ import pytest
 from moose.canbus.safety import CommandGuard, GuardParams, GuardState
 from moose.config import load_config
 from moose.minimum_risk import ActuatorLimits, Command, MinimumRiskManeuver
-from moose.params import VehicleParams
-from moose.schema import MinimumRiskParams
+from moose.params import ParamError, VehicleParams
+from moose.schema import MINIMUM_RISK_BOUNDS, MinimumRiskParams
 from moose.vehicle import VehiclePlant, initial_state
 
 DT = 0.01
@@ -97,3 +101,94 @@ def test_against_the_plant_the_car_steers_straight_and_stops_inside_a_lane_chang
     # T_brake = T_max on both rear wheels: a ≥ 2 T_max / (r m) ≈ 1.44 m/s², so at most v²/2a ≈ 12.5 m (+ ramps)
     assert np.hypot(s[0], s[1]) < 6.0**2 / (2 * 2 * vehicle.T_max / (vehicle.r * vehicle.m)) + 2.0
     assert abs(s[2]) < 0.3 and abs(s[5]) < 0.01
+
+
+# -- hard bounds: configuration may choose within them, never disarm the fallback
+
+BOUNDS = [(f.name, *getattr(MINIMUM_RISK_BOUNDS, f.name)) for f in dataclasses.fields(MinimumRiskParams)]
+
+
+@pytest.mark.parametrize(("name", "low", "high"), BOUNDS, ids=[b[0] for b in BOUNDS])
+def test_every_parameter_of_the_maneuver_has_hard_bounds(name: str, low: float, high: float) -> None:
+    default = getattr(MinimumRiskParams(), name)
+    assert low <= default <= high
+    MinimumRiskParams(**{name: high})
+    with pytest.raises(ParamError, match=rf"{name} = .* is invalid: expected .*hard bound.* of the minimum-risk"):
+        MinimumRiskParams(**{name: high * 1.001})
+    if low > 0:
+        MinimumRiskParams(**{name: low})
+        with pytest.raises(ParamError, match=rf"{name} = .* is invalid: expected a value in \[{low:g}, {high:g}\]"):
+            MinimumRiskParams(**{name: low * 0.999})
+    with pytest.raises(ParamError, match=rf"{name} = 0.0 is invalid"):
+        MinimumRiskParams(**{name: 0.0})
+
+
+@pytest.mark.parametrize("value", ["minimum_risk.brake_gain=1.0e+12", "minimum_risk.eps_gain=1.0e+12",
+                                   "minimum_risk.stop_time=1.0e+9"])
+def test_the_bridge_refuses_a_maneuver_that_would_not_stop_the_car(value: str) -> None:
+    """The probe: ``moose node can_bridge`` accepted brake and EPS gains of 1e12 and a stop time of 1e9."""
+    out = subprocess.run([sys.executable, "-m", "moose.cli", "node", "can_bridge", "--param", value],
+                         capture_output=True, text=True, timeout=120)
+    name = value.split("=")[0]
+    assert out.returncode == 2 and f"can_bridge.{name} = " in out.stderr and "hard bounds" in out.stderr, out.stderr
+    assert "started" not in out.stdout + out.stderr
+
+
+def test_a_file_cannot_switch_off_the_safe_stop(tmp_path: Path) -> None:
+    """The probe: ``minimum_risk: {stop_speed: 1000.0, straight_tolerance: 1000.0}`` was accepted, and with the
+    observer killed the car left the field at 5 m/s."""
+    path = tmp_path / "hostile.yaml"
+    path.write_text("/**:\n  ros__parameters:\n    minimum_risk: {stop_speed: 1000.0, straight_tolerance: 1000.0}\n")
+    for command in (["simulate", "--no-bag", "--duration", "0.5"], ["launch", "--no-bag"]):
+        out = subprocess.run([sys.executable, "-m", "moose.cli", *command, "--config", str(path)],
+                             capture_output=True, text=True, timeout=120)
+        assert out.returncode == 2 and "minimum_risk.stop_speed = 1000.0 is invalid: expected at most 0.3, the hard " \
+            "bound of the minimum-risk maneuver" in out.stderr, out.stderr
+
+
+def stop(params: MinimumRiskParams, v0: float = 7.0, delta0: float = 0.3) -> dict[str, np.ndarray]:
+    """The law alone against the plant from ``v0`` at steering angle ``delta0`` (fresh EPS angle and wheel speeds):
+    12 s of the car's x, y, heading, v_x and δ, and when the law counted the car stopped."""
+    config = load_config()
+    plant = VehiclePlant(config.vehicle, dt=config.simulation.plant_dt)
+    state = initial_state(config.vehicle, x=0.0, vx=v0)
+    state[8] = delta0
+    plant.reset(state)
+    law = MinimumRiskManeuver(params, ActuatorLimits.from_vehicle(config.vehicle), DT)
+    out, rows, stopped = Command(delta0, 0.0, 0.0, 0.0), [], np.nan
+    for k in range(1200):
+        s = plant.state
+        out = law.step(out, float(s[8]), 0.5 * float(s[6] + s[7]))
+        plant.step(np.array([out.steering_rate, out.torque_rl, out.torque_rr]),
+                   config.simulation.plant_steps_per_motion)
+        rows.append([(k + 1) * DT, *plant.state[[0, 1, 2, 3, 8]]])
+        if law.stopped and np.isnan(stopped):
+            stopped = (k + 1) * DT
+    t, x, y, theta, vx, delta = np.array(rows).T
+    return {"t": t, "x": x, "y": y, "theta": theta, "vx": vx, "delta": delta, "stopped": np.array(stopped)}
+
+
+def test_at_its_weakest_the_maneuver_still_steers_straight_and_stops() -> None:
+    """From 7 m/s at full lock with the most permissive values the bounds accept: straight within 0.5 s, a stop
+    within the distance the lowest T_brake allows, the heading turned by little more than the default's, and what
+    is left once the torque is released below 0.1 m/s (the bound's 0.3 rad/s at Table I's r)."""
+    vehicle = VehicleParams()
+    weakest, default = stop(MinimumRiskParams(**MINIMUM_RISK_BOUNDS.weakest())), stop(MinimumRiskParams())
+    tolerance = MINIMUM_RISK_BOUNDS.straight_tolerance[1]
+    straight = weakest["t"][np.argmax(np.abs(weakest["delta"]) <= tolerance)]
+    assert straight < 0.5
+    decel = 2 * MINIMUM_RISK_BOUNDS.brake_fraction[0] * vehicle.T_max / (vehicle.r * vehicle.m + 2 * vehicle.J_wr
+                                                                         / vehicle.r)
+    distance = float(np.hypot(weakest["x"][-1], weakest["y"][-1]))
+    assert np.isfinite(weakest["stopped"]) and distance < 7.0**2 / (2 * decel) + 2.0
+    assert abs(weakest["theta"][-1]) < abs(default["theta"][-1]) + 0.3
+    assert 0.0 <= weakest["vx"][-1] < MINIMUM_RISK_BOUNDS.stop_speed[1] * vehicle.r + 0.005 < 0.1
+
+
+def test_at_its_stiffest_gains_the_maneuver_neither_reverses_nor_oversteers() -> None:
+    """k_ω and K_δ at their upper bounds: the braking on one period old wheel speeds never drives the car backwards,
+    and the steering does not swing through straight ahead."""
+    run = stop(MinimumRiskParams(brake_gain=MINIMUM_RISK_BOUNDS.brake_gain[1],
+                                 eps_gain=MINIMUM_RISK_BOUNDS.eps_gain[1]))
+    assert np.isfinite(run["stopped"]) and float(np.min(run["vx"])) >= 0.0
+    assert float(np.min(run["delta"])) >= -MinimumRiskParams().straight_tolerance

@@ -18,11 +18,16 @@ share are declared once here and derived, never repeated:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import numbers
 from typing import Literal, get_args
 
 from .params import ParamError, VehicleParams, check, non_negative, positive, replace, unit_interval
+
+
+def _within(low: float, high: float, value: float) -> bool:
+    return low <= value <= high
 
 
 def _positive_finite(value: object) -> bool:
@@ -367,14 +372,60 @@ class MotionParams:
 
 
 @dataclasses.dataclass(frozen=True)
+class MinimumRiskBounds:
+    """Hard bounds of the minimum-risk maneuver's parameters, ``(low, high)`` inclusive (``low`` 0: any positive
+    value): constants of the fallback, not configuration, as :data:`moose.params.VEHICLE_LIMITS` are the car's.
+
+    A parameter file may choose a value within them, never outside: outside, the fallback would be disarmed
+    (no braking, no steering back, a "stop" declared at speed) or would ask more than the 10 ms command loop
+    (config/kanon.dbc's command cycle T) can follow.  docs/design.md, "Command guard", derives each bound from
+    Table I (m = 925 kg, r = 0.301 m, J_wr = 1.24 kg m², T_max = 200 N m) and measures its effect."""
+
+    brake_fraction: tuple[float, float] = (0.8, 1.0)
+    """T_brake / T_max: at 0.8 the stop from 7 m/s takes 22 m instead of 18 m; lower, every metre more along
+    the heading at the loss carries the car further sideways."""
+    brake_gain: tuple[float, float] = (100.0, 1000.0)
+    """k_ω (N m s/rad): the time constant τ = (m r² + 2 J_wr) / (2 k_ω) of the braking near standstill is at most
+    0.43 s (k_ω ≥ 100: full torque down to T_max / k_ω = 2 rad/s, 0.6 m/s, and from there to a stop in about two τ)
+    and at least 4 command periods (k_ω ≤ 1000: T/τ ≤ 1/4, so the braking on one period old wheel speeds neither
+    oscillates nor reverses the car)."""
+    stop_speed: tuple[float, float] = (0.0, 0.3)
+    """|ω̄| (rad/s) that counts as stopped: at most 0.09 m/s at Table I's r, where releasing the torque leaves a
+    car that rolling resistance stops within centimetres (our plant has none: it keeps that speed)."""
+    stop_time: tuple[float, float] = (0.1, 1.0)
+    """s within ``stop_speed`` before the torque is released: at least 10 command periods, so that a dip of the
+    wheel speeds (a wheel locking for a moment, noise) cannot end the braking for good; at most 1 s, so that the
+    stop is reported."""
+    eps_gain: tuple[float, float] = (10.0, 25.0)
+    """K_δ (1/s): at 10 the wheels are straight from full lock within 0.5 s; at most K_δ T = 1/4, so the EPS loop
+    on one period old angles does not overshoot through straight ahead."""
+    straight_tolerance: tuple[float, float] = (0.0, 0.01)
+    """|δ| (rad) that counts as straight: a wheel left at 0.01 rad turns the car by d · 0.01 / (l_f + l_r), 0.1 rad
+    over the 18 m stop from 7 m/s."""
+
+    def weakest(self) -> dict[str, float]:
+        """The most permissive values the bounds accept: the least braking (lowest T_brake and k_ω), the earliest
+        release (highest stop speed, shortest stop time) and the laziest steering back (lowest K_δ, widest
+        tolerance)."""
+        return {"brake_fraction": self.brake_fraction[0], "brake_gain": self.brake_gain[0],
+                "stop_speed": self.stop_speed[1], "stop_time": self.stop_time[0], "eps_gain": self.eps_gain[0],
+                "straight_tolerance": self.straight_tolerance[1]}
+
+
+MINIMUM_RISK_BOUNDS = MinimumRiskBounds()
+"""The bounds every :class:`MinimumRiskParams` is held to."""
+
+
+@dataclasses.dataclass(frozen=True)
 class MinimumRiskParams:
     """The minimum-risk maneuver (:mod:`moose.minimum_risk`): steer back to straight, brake to a stop.
 
     One set for every place that runs it: the CAN bridge's guard, the motion controller, the simulator's
-    topic-side vehicle I/O."""
+    topic-side vehicle I/O.  Every value lies within :data:`MINIMUM_RISK_BOUNDS`: configuration cannot disarm
+    the fallback."""
 
     brake_fraction: float = 1.0
-    """T_brake as a share of T_max (0, 1]: the largest braking torque per rear motor."""
+    """T_brake as a share of T_max: the largest braking torque per rear motor."""
     brake_gain: float = 150.0
     """k_ω (N m per rad/s of mean rear wheel speed).  Below T_brake the car slows exponentially with the
     time constant m r² / (2 k_ω) ≈ 0.28 s (Table I's m and r)."""
@@ -390,8 +441,13 @@ class MinimumRiskParams:
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
-            check(f.name, getattr(self, f.name), _positive_finite, "a positive finite number")
-        check("brake_fraction", self.brake_fraction, lambda v: v <= 1.0, "a share of T_max in (0, 1]")
+            value = getattr(self, f.name)
+            check(f.name, value, _positive_finite, "a positive finite number")
+            low, high = getattr(MINIMUM_RISK_BOUNDS, f.name)
+            bound = (f"a value in [{low:g}, {high:g}], the hard bounds" if low > 0
+                     else f"at most {high:g}, the hard bound")
+            check(f.name, value, functools.partial(_within, low, high),
+                  f"{bound} of the minimum-risk maneuver (configuration cannot disarm it)")
 
 
 @dataclasses.dataclass(frozen=True)
