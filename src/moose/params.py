@@ -89,7 +89,7 @@ VEHICLE_LIMITS = VehicleLimits()
 class VehicleParams:
     """FPEV2-Kanon single-track parameters: Table I of the paper (SI units).
 
-    ``track``, ``v_low`` and ``mu`` are not in Table I; see docs/design.md.
+    ``track``, ``length``, ``width``, ``v_low`` and ``mu`` are not in Table I; see docs/design.md.
     """
 
     m: float = 925.0
@@ -126,6 +126,14 @@ class VehicleParams:
     assumes the same μ unless ``planning.mu_estimate`` says otherwise."""
     track: float = 1.3
     """Rear track width (m); not in Table I."""
+    length: float = 2.5
+    """Overall length of the body (m); not in Table I.  Our estimate: Table I's wheelbase l_f + l_r = 1.70 m
+    with 0.4 m overhangs front and rear, those of a production car of that wheelbase and mass (a 925 kg
+    two-seater); the footprint of the CommonRoad export and the independent verdict (docs/design.md,
+    "CommonRoad"), not used by the dynamics."""
+    width: float = 1.5
+    """Overall width of the body (m); not in Table I.  Our estimate: the track plus a tyre's width and the
+    body's margin (0.2 m in all); the footprint's width, like :attr:`length`."""
     v_low: float = 2.0
     """Lower bound of the slip denominators (m/s): low-speed regularisation."""
     g: float = G
@@ -138,11 +146,21 @@ class VehicleParams:
             limit = getattr(VEHICLE_LIMITS, f.name)
             check(f"vehicle.{f.name}", getattr(self, f.name), at_most(limit),
                   f"at most the vehicle's hard limit {limit:g} (configuration can only tighten it)")
+        check("vehicle.length", self.length, lambda v: v >= self.wheelbase,
+              f"a body at least as long as the wheelbase l_f + l_r = {self.wheelbase:g} m")
+        check("vehicle.width", self.width, lambda v: v >= self.track,
+              f"a body at least as wide as the track {self.track:g} m")
 
     @property
     def wheelbase(self) -> float:
         """l_f + l_r (m)."""
         return self.lf + self.lr
+
+    @property
+    def footprint_offset(self) -> float:
+        """How far the centre of the footprint (:attr:`length` × :attr:`width`) lies ahead of the CoG (m):
+        (l_f − l_r) / 2, the overhangs being equal front and rear."""
+        return 0.5 * (self.lf - self.lr)
 
     @property
     def Fzf(self) -> float:
