@@ -10,7 +10,7 @@ STAMP  := $(VENV)/.installed
 
 $(STAMP): pyproject.toml ros2_ws/src/moose_ros/setup.py
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet -e '.[test,sweep,dask,lint]' -e 'ros2_ws/src/moose_ros[parquet]'
+	$(BIN)/python -m pip install --quiet -e '.[test,sweep,dask,lint,commonroad]' -e 'ros2_ws/src/moose_ros[parquet]'
 	touch $(STAMP)
 
 run: $(STAMP)

@@ -191,7 +191,7 @@ SUMMARY_KEYS = {
     "tau_scenario_s", "tau_s", "nu", "w_m", "v_detect_mps", "paper_nu", "max_abs_steer_rad", "x_peak_steer_m",
     "max_lateral_offset_m", "final_lateral_offset_m", "min_speed_mps", "max_speed_mps", "mpc_solve_ms",
     "mpc_status_counts", "mean_weight_mpc", "duration_s", "steer_total_variation_rad", "time_at_steer_limit_s",
-    "peak_steer_rate_rad_s", "notes",
+    "peak_steer_rate_rad_s", "commonroad_verdict", "criticality", "notes",
 }
 """The summary's fields: what `moose simulate --json`, `moose launch --json`, the sweep's table and bag tools read."""
 
@@ -269,7 +269,9 @@ def test_a_run_without_any_sample_is_incomplete_with_every_quantity_null_and_exp
     for key in ("min_clearance_m", "max_abs_steer_rad", "max_lateral_offset_m", "final_lateral_offset_m",
                 "min_speed_mps", "max_speed_mps", "duration_s", "steer_total_variation_rad"):
         assert s[key] is None, key
-    assert set(s["notes"]) == {"tau_s", "nu", "mean_weight_mpc"}  # a None that is no failure has no note of its own
+    # a None that is no failure has no note of its own; the CommonRoad verdict has nothing to judge, the criticality
+    # measures were not asked for
+    assert set(s["notes"]) == {"tau_s", "nu", "mean_weight_mpc", "commonroad_verdict", "criticality"}
     json.dumps(s, allow_nan=False)
 
 

@@ -12,6 +12,7 @@ from typing import Any, Optional
 
 import numpy as np
 
+from .commonroad.assess import assess
 from .simulation import SimulationResult
 from .timing import describe
 from .verdict import DEFAULT_PARAMS, finite_or_none, judge, limits_of
@@ -34,8 +35,12 @@ def smoothness(t: np.ndarray, delta: np.ndarray, delta_max: float, t_from: float
     }
 
 
-def summarize(result: SimulationResult) -> dict[str, Any]:
-    """The JSON summary of a run (keys documented in the README)."""
+def summarize(result: SimulationResult, criticality: bool = False) -> dict[str, Any]:
+    """The JSON summary of a run (keys documented in the README).
+
+    With the CommonRoad packages installed it carries the drivability checker's verdict beside ours
+    (``commonroad_verdict``, :func:`moose.commonroad.assess.assess`) and, with ``criticality``, commonroad-crime's
+    measures of the situation (``criticality``: seconds of computation, so only when asked)."""
     trace, scenario, config = result.trace, result.scenario, result.config
     zone = scenario.danger_zone
     verdict = judge(trace["t"], trace["x"], trace["y"], trace["theta"], trace["vx"], trace["vy"], zone,
@@ -89,6 +94,8 @@ def summarize(result: SimulationResult) -> dict[str, Any]:
         "mean_weight_mpc": float(np.mean(threatened)) if threatened else None,
         "duration_s": float(t[-1]) if t.size else None,
     }
+    summary["commonroad_verdict"], summary["criticality"], commonroad_notes = assess(result, verdict, criticality)
+    notes.update(commonroad_notes)
     if first is not None:
         after = np.flatnonzero(t >= first.t)
         if after.size:

@@ -176,6 +176,8 @@ def add_scenario_arguments(parser: argparse.ArgumentParser) -> None:
     """Scenario selection shared by ``simulate`` and ``launch``."""
     group = parser.add_argument_group("scenario (a file or an ad-hoc moose test)")
     group.add_argument("--scenario", help=f"name in config/scenarios or a YAML path (default {DEFAULT_SCENARIO})")
+    group.add_argument("--commonroad", metavar="FILE.xml",
+                       help="a CommonRoad scenario (one static obstacle ahead on a straight road) as the moose test")
     group.add_argument("--speed", type=positive_float, help="ad-hoc test: speed at detection and desired speed (m/s)")
     group.add_argument("--tau", type=positive_float, help="ad-hoc test: time to collision at appearance (s)")
     group.add_argument("--obstacle-half-width", type=positive_float, help="ad-hoc test: danger-zone half width (m)")
@@ -191,16 +193,31 @@ def add_scenario_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--seed", type=non_negative_int, default=0, help="seed of the sensor noise (an integer >= 0)")
 
 
-def scenario_from_args(args: Any) -> Any:
-    """The scenario named by ``args`` (file, or ad-hoc flags): any object with the attributes of
+def scenario_from_args(args: Any, vehicle: Any = None) -> Any:
+    """The scenario named by ``args`` (file, CommonRoad file, or ad-hoc flags): any object with the attributes of
     :func:`add_scenario_arguments` (``scenario``, ``speed``, ``tau``, ``obstacle_half_width``,
-    ``obstacle_length``, ``duration``, ``mu``), such as parsed arguments or a node's parameters."""
+    ``obstacle_length``, ``duration``, ``mu``; ``commonroad`` may be absent), such as parsed arguments or a
+    node's parameters.  A CommonRoad file is read with ``vehicle``'s footprint (default: ``--config``'s)."""
     import dataclasses
 
     from ..scenario import adhoc_scenario, load_scenario
 
     adhoc = [args.speed, args.tau, args.obstacle_half_width]
-    if any(v is not None for v in adhoc):
+    commonroad = getattr(args, "commonroad", None)
+    if commonroad is not None and (args.scenario or any(v is not None for v in adhoc)):
+        raise ParamError("--commonroad cannot be combined with --scenario or the ad-hoc flags")
+    if commonroad is not None:
+        from ..commonroad import require
+
+        require("--commonroad")
+        from ..commonroad.scenario import load as load_commonroad
+
+        if vehicle is None:
+            from ..config import load_config
+
+            vehicle = load_config(getattr(args, "config", None), "moose").vehicle
+        scenario = load_commonroad(commonroad, vehicle)
+    elif any(v is not None for v in adhoc):
         if args.scenario:
             raise ParamError("--scenario cannot be combined with the ad-hoc flags --speed/--tau/--obstacle-half-width")
         if any(v is None for v in adhoc):

@@ -38,6 +38,10 @@ def add_subparser(subparsers: Any) -> None:
     simulate.add_argument("--plot", help="write the paper-style figure (PNG) to this path")
     simulate.add_argument("--bag", help="record the run into this bag directory (default: a new folder under runs/)")
     simulate.add_argument("--no-bag", action="store_true", help="do not record a bag")
+    simulate.add_argument("--commonroad-out", metavar="FILE.xml",
+                          help="write the run as a CommonRoad scenario (road, obstacle, planning problem, ego path)")
+    simulate.add_argument("--criticality", action="store_true",
+                          help="add commonroad-crime's TTC, TTB, TTS, TTK, TTR to the summary (a few seconds)")
     simulate.add_argument("--set", action="append", default=[], metavar="GROUP.KEY=VALUE",
                           help="change one parameter of the configuration, e.g. planning.N_p=20 (repeatable)")
     add_timing_argument(simulate)
@@ -66,6 +70,16 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"mean w_MPC      {_fmt(summary['mean_weight_mpc'])} (over steps with a threat)",
         f"timing          {format_timing(summary['timing'])}",
     ]
+    independent = summary.get("commonroad_verdict")
+    if independent is not None:
+        found = (f"footprint {'touches' if independent['collision'] else 'clear of'} the obstacle, "
+                 f"{'stays on' if independent['road_compliant'] else 'leaves'} the road")
+        how = "agrees" if independent["agrees"] else "differs: " + "; ".join(independent["differences"])
+        lines.append(f"CommonRoad      {found} ({how})")
+    measures = summary.get("criticality")
+    if measures is not None:
+        lines.append("criticality     " + ", ".join(f"{k.split('_')[0].upper()} {_fmt(v)}" for k, v in measures.items()
+                                                    if k.endswith("_s")))
     return "\n".join(lines)
 
 
@@ -99,16 +113,25 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from ..simulation import simulate
 
     record = bag_recorder(args)
-    scenario = scenario_from_args(args)
     config = run_config(args, "moose simulate")
+    scenario = scenario_from_args(args, config.vehicle)
+    if args.commonroad_out is not None or args.criticality:
+        from ..commonroad import require
+
+        require("--commonroad-out" if args.commonroad_out is not None else "--criticality")
     # every output is checked before the run, so none of them is lost at its end
     json_path = check_output_file("--json", args.json)
+    commonroad_path = check_output_file("--commonroad-out", args.commonroad_out, ("xml",))
     plot_path = check_output_file("--plot", args.plot, plot_suffixes()) if args.plot is not None else None
     bag_path = check_output_dir("--bag", args.bag) if record is not None else None
     result = simulate(config, scenario, planner=args.planner, seed=args.seed)
     INTERRUPTS.check()  # an interrupted run is not reported as one that ended
-    summary = summarize(result)
+    summary = summarize(result, criticality=args.criticality)
     print(format_summary(summary))
+    if commonroad_path is not None:
+        from ..commonroad.scenario import write_run
+
+        print(f"commonroad      {write_run(result, commonroad_path)}")
     if json_path is not None:
         json_path.write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n", encoding="utf-8")
         print(f"summary         {json_path}")

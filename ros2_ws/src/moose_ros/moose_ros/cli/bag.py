@@ -35,8 +35,9 @@ def add_subparser(subparsers: Any) -> None:
     play.add_argument("--clock", action="store_true", help="publish /clock from the bag's timestamps")
     info = bag_sub.add_parser("info", help="topics, types, counts, rates, duration")
     info.add_argument("path")
-    export = bag_sub.add_parser("export", help="export topics to CSV or Parquet (one file per topic)")
-    export.add_argument("--format", choices=["csv", "parquet"], default="csv")
+    export = bag_sub.add_parser("export", help="export topics to CSV or Parquet (one file per topic), or the run as a "
+                                "CommonRoad scenario (commonroad.xml)")
+    export.add_argument("--format", choices=["csv", "parquet", "commonroad"], default="csv")
     export.add_argument("path")
     export.add_argument("-o", "--output", required=True, help="output folder")
     export.add_argument("--topics", nargs="+")
@@ -66,6 +67,12 @@ def cmd_bag(args: argparse.Namespace) -> int:
                 print(f"  {topic:<28} {e['type']:<36} {e['count']:>7}  {e['rate_hz']:8.2f} Hz")
             for type_name in info["registered_types"]:
                 print(f"  (decoded with the bag's own definition: {type_name})")
+        elif args.bag_command == "export" and args.format == "commonroad":
+            from ..bag.commonroad import export_commonroad
+
+            if args.topics:
+                raise ParamError("--topics does not apply to --format commonroad (it exports the run)")
+            print(export_commonroad(args.path, args.output, report))
         elif args.bag_command == "export":
             for path in bag.export(args.path, args.output, args.topics, args.format, report):
                 print(path)
