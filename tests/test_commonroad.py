@@ -250,6 +250,14 @@ def test_without_the_packages_the_core_runs_and_a_command_that_needs_them_says_s
     assert "pip install 'moose-avoidance[commonroad]'" in out.stderr and not (tmp_path / "r.xml").exists()
 
 
+def test_the_graph_refuses_a_commonroad_scenario_its_nodes_could_not_build(tmp_path: Path) -> None:
+    """The nodes build the scenario from a name or ad-hoc flags: with a CommonRoad file they would run another test."""
+    path = _file(tmp_path, [_lanelet(1, -1.75, 1.75)], [_obstacle(7, 30.0, 0.0)])
+    out = subprocess.run([sys.executable, "-m", "moose.cli", "launch", "--commonroad", str(path), "--no-bag"],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2 and "moose: error: --commonroad is not supported by moose launch" in out.stderr
+
+
 def test_a_bag_exports_as_the_scenario_of_its_run(tmp_path: Path) -> None:
     bag = Path(__file__).resolve().parents[1] / "bags" / "paper_v7_tau1.4_combined"
     out = subprocess.run([sys.executable, "-m", "moose.cli", "bag", "export", "--format", "commonroad", str(bag),

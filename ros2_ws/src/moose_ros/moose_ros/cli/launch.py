@@ -62,6 +62,9 @@ def cmd_launch(args: argparse.Namespace) -> int:
     from ..launch import launch, planner_mode
     from ..parameters import ScenarioParams
 
+    if args.commonroad is not None:  # the nodes build their scenario from a name or the ad-hoc flags, not from a file
+        raise ParamError("--commonroad is not supported by moose launch: the nodes take the scenario as a name or "
+                         "ad-hoc flags; run it with moose simulate --commonroad")
     scenario = scenario_from_args(args)
     scenario_fields = [f.name for f in dataclasses.fields(ScenarioParams)]
     params = {k: getattr(args, k) for k in scenario_fields if getattr(args, k) is not None}
