@@ -14,7 +14,7 @@ import pytest
 
 from isolation import claim_domain
 from moose.params import ParamError
-from moose_ros.runtime.discovery import Discovery, names_interface
+from moose_ros.runtime.discovery import FASTDDS_PROFILE, Discovery, names_interface, udp_bindings
 
 LO_XML = ('<CycloneDDS><Domain><General><Interfaces><NetworkInterface name="lo"/></Interfaces></General></Domain>'
           '</CycloneDDS>')
@@ -26,7 +26,7 @@ def parts(config: str) -> list[ET.Element]:
 
 def test_unset_means_this_host_bound_to_loopback() -> None:
     d = Discovery.from_environ({})
-    assert d.range == "LOCALHOST" and d.loopback_only
+    assert d.range == "LOCALHOST" and d.cyclone_loopback
     root = parts(d.cyclone_config())[0]
     assert [e.get("address") for e in root.iter("NetworkInterface")] == ["127.0.0.1"]
     assert root.findtext("Domain/General/AllowMulticast") == "false"
@@ -53,13 +53,13 @@ def test_each_range_maps_like_rmw_cyclonedds() -> None:
     peers = Discovery.from_environ({"ROS_STATIC_PEERS": " 10.0.0.7 ; ;fd00::2"})
     root = parts(peers.cyclone_config())[0]
     assert [p.get("address") for p in root.iter("Peer")] == ["127.0.0.1", "10.0.0.7", "fd00::2"]
-    assert not peers.loopback_only and list(root.iter("NetworkInterface")) == []
+    assert not peers.cyclone_loopback and list(root.iter("NetworkInterface")) == []
 
 
 def test_deprecated_localhost_only_prevails_and_drops_the_peers() -> None:
     d = Discovery.from_environ({"ROS_LOCALHOST_ONLY": "1", "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET",
                                 "ROS_STATIC_PEERS": "10.0.0.7"})
-    assert d.range == "LOCALHOST" and d.static_peers == () and d.loopback_only and d.ignored_peers == ("10.0.0.7",)
+    assert d.range == "LOCALHOST" and d.static_peers == () and d.cyclone_loopback and d.ignored_peers == ("10.0.0.7",)
     environ = {"ROS_LOCALHOST_ONLY": "0", "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}
     assert Discovery.from_environ(environ).range == "SUBNET"
 
@@ -78,9 +78,9 @@ def test_bad_values_are_refused_with_the_variable_named(env: dict, match: str) -
 def test_the_users_uri_comes_last_and_its_interfaces_replace_the_loopback_binding(tmp_path: Path) -> None:
     tracing = "<CycloneDDS><Domain><Tracing><Verbosity>config</Verbosity></Tracing></Domain></CycloneDDS>"
     d = Discovery.from_environ({"CYCLONEDDS_URI": tracing})
-    assert d.loopback_only and d.cyclone_config().endswith("," + tracing)  # read after the range: it wins
+    assert d.cyclone_loopback and d.cyclone_config().endswith("," + tracing)  # read after the range: it wins
     inline = Discovery.from_environ({"CYCLONEDDS_URI": LO_XML})
-    assert not inline.loopback_only and inline.cyclone_config().count("NetworkInterface") == 1
+    assert not inline.cyclone_loopback and inline.cyclone_config().count("NetworkInterface") == 1
     file = tmp_path / "dds.xml"
     file.write_text(LO_XML)
     assert names_interface(file.as_uri()) and names_interface(str(file))
@@ -93,7 +93,7 @@ def test_ros_environment_gives_ros2_tools_the_same_settings() -> None:
     env = Discovery.from_environ({}).ros_environment()
     assert env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST" and "127.0.0.1" in env["CYCLONEDDS_URI"]
     again = Discovery.from_environ(env)  # idempotent: the binding is not added twice
-    assert "CYCLONEDDS_URI" not in again.ros_environment() and not again.loopback_only  # left as it is
+    assert "CYCLONEDDS_URI" not in again.ros_environment() and not again.cyclone_loopback  # left as it is
     assert again.cyclone_config().count("NetworkInterface") == 1
     subnet = Discovery.from_environ({"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}).ros_environment()
     assert subnet == {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}
@@ -117,3 +117,68 @@ def test_the_generated_configuration_is_accepted_by_cyclone_dds() -> None:
     out = subprocess.run([sys.executable, "-c", script, *map(str, domains)], capture_output=True, text=True,
                          timeout=60)
     assert out.stdout.strip() == "ok", out.stderr
+
+
+def test_fast_dds_gets_the_loopback_profile_and_the_range_in_it() -> None:
+    """rmw_fastrtps' LOCALHOST adds a UDP transport on every interface to any profile's: an rclpy node on Fast DDS
+    asks it for SYSTEM_DEFAULT, and the profile (loopback UDP, 127.0.0.1 as the peer, no multicast) is the range."""
+    env = Discovery.from_environ({}).rclpy_environment()
+    assert env == {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SYSTEM_DEFAULT", "SKIP_DEFAULT_XML_FILE": "1",
+                   "FASTRTPS_DEFAULT_PROFILES_FILE": str(FASTDDS_PROFILE),
+                   "FASTDDS_DEFAULT_PROFILES_FILE": str(FASTDDS_PROFILE)}
+    ns = {"f": "http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles"}
+    profile = ET.parse(FASTDDS_PROFILE).getroot()
+    assert [a.text for a in profile.iterfind(".//f:interfaceWhiteList/f:address", ns)] == ["127.0.0.1"]
+    assert profile.findtext(".//f:useBuiltinTransports", namespaces=ns) == "false"
+    assert profile.find(".//f:metatrafficMulticastLocatorList", ns) is None
+    assert [a.text for a in profile.iterfind(".//f:initialPeersList//f:address", ns)] == ["127.0.0.1"]
+    assert profile.find(".//f:participant", ns).get("is_default_profile") == "true"
+    # the opt-ins, a profile of the user's and other RMWs keep ROS 2's own settings
+    for environ in ({"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}, {"ROS_STATIC_PEERS": "10.0.0.7"},
+                    {"FASTRTPS_DEFAULT_PROFILES_FILE": "/etc/mine.xml"}, {"RMW_IMPLEMENTATION": "rmw_cyclonedds_cpp"},
+                    {"RMW_IMPLEMENTATION": "rmw_zenoh_cpp"}):
+        d = Discovery.from_environ(environ)
+        assert d.rclpy_environment() == d.ros_environment(), environ
+
+
+def test_the_log_line_says_how_each_runtime_holds_the_range() -> None:
+    here = "LOCALHOST: this host only, "
+    d = Discovery.from_environ({})
+    assert d.describe() == here + "Cyclone DDS on the loopback interface"
+    assert d.describe("rmw_fastrtps_cpp") == here + "Fast DDS bound to loopback (fastdds_loopback.xml)"
+    assert d.describe("rmw_cyclonedds_cpp") == d.describe()
+    assert d.describe("rmw_zenoh_cpp") == here + "ROS 2's own on rmw_zenoh_cpp (not bound to loopback by moose)"
+    mine = Discovery.from_environ({"FASTRTPS_DEFAULT_PROFILES_FILE": "/etc/mine.xml"})
+    assert mine.describe("rmw_fastrtps_cpp") == (here + "then the Fast DDS profiles of /etc/mine.xml (not bound to "
+                                                 "loopback by moose)")
+    peers = Discovery.from_environ({"ROS_STATIC_PEERS": "10.0.0.7"})
+    assert peers.describe("rmw_fastrtps_cpp") == here + "static peers 10.0.0.7"
+
+
+def test_udp_bindings_reads_this_process_sockets() -> None:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as a, socket.socket(socket.AF_INET6, socket.SOCK_DGRAM) as b:
+        a.bind(("127.0.0.1", 0))
+        b.bind(("::1", 0))
+        found = set((udp_bindings() or {}).values())
+        assert ("127.0.0.1", a.getsockname()[1]) in found and ("[::1]", b.getsockname()[1]) in found
+
+
+def test_an_rclpy_node_refuses_to_run_when_fast_dds_did_not_apply_the_profile(ros_env: dict[str, str],
+                                                                            tmp_path: Path) -> None:
+    """The check after the participant is made: a profile that does not bind to loopback (here: Fast DDS's
+    built-in transports) leaves sockets on every address, and the node refuses to start, naming them."""
+    loose = tmp_path / "loose.xml"
+    loose.write_text('<dds xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles"><profiles>'
+                     '<participant profile_name="loose" is_default_profile="true"><rtps/></participant>'
+                     "</profiles></dds>")
+    script = ("import sys\nfrom pathlib import Path\nimport moose_ros.runtime.discovery as d\n"
+              "d.FASTDDS_PROFILE = Path(sys.argv[1])\nfrom moose.params import ParamError\n"
+              "from moose_ros.runtime import create_node\n"
+              "try:\n    create_node('probe')\nexcept ParamError as exc:\n    print(exc)\n")
+    env = {k: v for k, v in ros_env.items() if k not in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "CYCLONEDDS_URI")}
+    out = subprocess.run([env["MOOSE_ROS_PYTHON"], "-c", script, str(loose)], capture_output=True, text=True,
+                         timeout=120, env={**env, "MOOSE_RUNTIME": "rclpy"})
+    assert f"Fast DDS did not apply {loose}: UDP sockets bound to 0.0.0.0:" in out.stdout, out.stdout + out.stderr
+    assert "refusing to run a node that the network can reach" in out.stdout

@@ -52,8 +52,9 @@ def test_wheels_install_into_a_fresh_environment_and_run_from_anywhere(tmp_path:
     installed = run([python, "-m", "pip", "install", ros], cwd=tmp_path)
     assert installed.returncode == 0, installed.stderr[-2000:]
     where = run([python, "-c", "import moose, moose_ros; from moose_ros.interfaces import msg_dir; "
-                 "print(moose.__file__, moose_ros.__file__, msg_dir(), sep='\\n')"], cwd=elsewhere)
-    assert [Path(p).is_relative_to(venv) for p in where.stdout.split()] == [True, True, True], where.stdout
+                 "from moose_ros.runtime.discovery import FASTDDS_PROFILE as f; assert f.is_file(), f; "
+                 "print(moose.__file__, moose_ros.__file__, msg_dir(), f, sep='\\n')"], cwd=elsewhere)
+    assert [Path(p).is_relative_to(venv) for p in where.stdout.split()] == [True] * 4, where.stdout
     simulated = run([moose, "simulate", "--scenario", "paper_v7_tau1.4", "--no-bag", "--duration", "2"], cwd=elsewhere)
     assert simulated.returncode == 0 and "outcome         CLEAR" in simulated.stdout, simulated.stderr[-2000:]
     recorded = run([moose, "simulate", "--scenario", "paper_v5_tau3", "--duration", "0.5"], cwd=elsewhere)

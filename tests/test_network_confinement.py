@@ -1,31 +1,38 @@
-"""The graph is confined to its host by default, tested from outside: a second network namespace stands in for
-another host on the same network.
+"""The graph is confined to its host by default, on both runtimes, tested from outside: a second network namespace
+stands in for another host on the same network.
 
 Two network namespaces joined by a veth pair (created here and removed afterwards, also on failure).  In
 namespace A, ``moose node can_bridge`` runs with its defaults (no ROS_DOMAIN_ID, no CYCLONEDDS_URI, no
-discovery variables: domain 0 of that namespace), and a listener decodes the command frames it puts on the
-``udp_multicast`` bus with cantools and the DBC.  From namespace B, plain Cyclone DDS participants (the wire
-format of a ROS 2 node: ``rt/`` topic, ``pkg::msg::dds_::Type_``, XCDR1) publish 0.3 rad of steering and
-200 N·m per motor on ``/control/actuator_command`` — with Cyclone's defaults (multicast discovery), and
-with namespace A's address as a unicast peer (an attacker who knows the car computer's address).  Neither
-may match the bridge, and no commanded steering may reach the bus; a publisher in namespace A on the
-runtime's defaults then does both (the bridge was reachable from its own host all along).  With
-``ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET`` (the opt-in) the publisher from B does reach the bus, and so does
-one on a host named in ``ROS_STATIC_PEERS``, so the test can fail.
+discovery variables: domain 0 of that namespace) on Cyclone DDS or on rclpy (Fast DDS, the Jazzy wheels of
+``make ros``), and a listener decodes the command frames it puts on the ``udp_multicast`` bus with cantools and
+the DBC.  From namespace B, participants publish 0.3 rad of steering and 200 N·m per motor on
+``/control/actuator_command``: plain Cyclone DDS participants (the wire format of a ROS 2 node: ``rt/`` topic,
+``pkg::msg::dds_::Type_``, XCDR1) with Cyclone's defaults (multicast discovery) and with namespace A's address as
+a unicast peer (an attacker who knows the car computer's address), and a plain rclpy node on Fast DDS with
+``ROS_STATIC_PEERS`` naming namespace A (the probe that reached the rclpy bridge: 2,401 frames, up to 0.3 rad and
+200 N·m).  None may match the bridge, no commanded steering may reach the bus, and on rclpy no socket of the
+bridge may be bound to anything but 127.0.0.1 (and the bus's multicast group, joined on loopback); a publisher in
+namespace A on the runtime's defaults then does reach the bus (the bridge was reachable from its own host all
+along).  With ``ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET`` (the opt-in) the publisher from B does reach the bus, and
+so does one on a host named in ``ROS_STATIC_PEERS``, so the test can fail.
 """
 from __future__ import annotations
 
+import contextlib
+import ipaddress
 import json
 import os
 import queue
 import secrets
 import shutil
 import signal
+import struct
 import subprocess
 import sys
 import textwrap
 import threading
 import time
+from pathlib import Path
 from typing import Iterator, Optional
 
 import pytest
@@ -43,7 +50,15 @@ PUBLISHER = textwrap.dedent("""
     import json, sys, time
     mode, config, duration = sys.argv[1], sys.argv[2], float(sys.argv[3])
     steer, torque = 0.3, 200.0
-    if mode == "runtime":  # our runtime on its defaults
+    if mode == "rclpy":  # a plain rclpy node (Fast DDS), not our runtime: ROS 2's own settings
+        import rclpy
+        from moose_msgs.msg import ActuatorCommand
+        rclpy.init()
+        node = rclpy.create_node("intruder")
+        pub = node.create_publisher(ActuatorCommand, "/control/actuator_command", 10)
+        make = lambda: ActuatorCommand(steering_angle=steer, torque_rl=torque, torque_rr=torque)
+        write, matched = pub.publish, pub.get_subscription_count
+    elif mode == "runtime":  # our runtime on its defaults
         from moose_ros.graph import ACTUATOR_COMMAND
         from moose_ros.runtime import create_node
         node = create_node("intruder")
@@ -99,6 +114,10 @@ LISTENER = textwrap.dedent("""
 """)
 
 
+BUS_GROUP = "239.74.163.2"
+"""moose.canbus.bus.DEFAULT_GROUP: the bridge's bus socket is bound to it (joined on loopback, TTL 0)."""
+
+
 def _ip(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run(["ip", *args], capture_output=True, text=True, timeout=15)
 
@@ -136,8 +155,9 @@ class Hosts:
         for ns in (self.a, self.b):
             _ip("netns", "del", ns)
 
-    def spawn(self, ns: str, args: list[str], env_extra: Optional[dict[str, str]] = None) -> subprocess.Popen:
-        env = {k: v for k, v in os.environ.items() if k not in DDS_VARIABLES}
+    def spawn(self, ns: str, args: list[str], env_extra: Optional[dict[str, str]] = None,
+              base: Optional[dict[str, str]] = None) -> subprocess.Popen:
+        env = {k: v for k, v in (os.environ if base is None else base).items() if k not in DDS_VARIABLES}
         env.update(env_extra or {})
         proc = subprocess.Popen(["ip", "netns", "exec", ns, *args], env=env, stdout=subprocess.PIPE,
                                 stderr=subprocess.STDOUT, text=True, start_new_session=True)
@@ -210,14 +230,28 @@ class Lines:
         raise AssertionError(f"no result; output:\n{''.join(self.lines)}")
 
 
-def start_bridge(hosts: Hosts, env: Optional[dict[str, str]] = None) -> Lines:
-    bridge = Lines(hosts.spawn(hosts.a, [sys.executable, "-m", "moose.cli", "node", "can_bridge"], env))
+@pytest.fixture(scope="module", params=["dds", "rclpy"])
+def runtime(request: pytest.FixtureRequest) -> tuple[str, str, dict[str, str]]:
+    """(runtime, interpreter, environment) of the bridge and of the publishers on that runtime: this interpreter
+    for Cyclone DDS; the ROS 2 prefix of ``make ros`` for rclpy (skipped, saying why, when it is not made)."""
+    if request.param == "dds":
+        return "dds", sys.executable, {**os.environ, "MOOSE_RUNTIME": "dds"}
+    env = request.getfixturevalue("ros_env")
+    return "rclpy", env["MOOSE_ROS_PYTHON"], {**env, "MOOSE_RUNTIME": "rclpy"}
+
+
+def start_bridge(hosts: Hosts, runtime: tuple[str, str, dict[str, str]],
+                 env: Optional[dict[str, str]] = None) -> Lines:
+    _name, python, base = runtime
+    bridge = Lines(hosts.spawn(hosts.a, [python, "-m", "moose.cli", "node", "can_bridge"], env, base))
     bridge.wait_for("can_bridge started", START_TIMEOUT)
     return bridge
 
 
-def attack(hosts: Hosts, ns: str, mode: str, config: str = "", env: Optional[dict[str, str]] = None) -> Lines:
-    return Lines(hosts.spawn(ns, [sys.executable, "-c", PUBLISHER, mode, config, str(ATTACK_S)], env))
+def attack(hosts: Hosts, ns: str, mode: str, config: str = "", env: Optional[dict[str, str]] = None,
+           runtime: Optional[tuple[str, str, dict[str, str]]] = None) -> Lines:
+    python, base = (sys.executable, None) if runtime is None else runtime[1:]
+    return Lines(hosts.spawn(ns, [python, "-c", PUBLISHER, mode, config, str(ATTACK_S)], env, base))
 
 
 def listen(hosts: Hosts) -> Lines:
@@ -231,34 +265,68 @@ def unicast_peer(address: str) -> str:
             "<ParticipantIndex>auto</ParticipantIndex></Discovery></Domain></CycloneDDS>")
 
 
-def test_the_bridge_on_its_defaults_cannot_be_reached_from_another_host(hosts: Hosts) -> None:
-    bridge = start_bridge(hosts)
+def udp_addresses(pid: int) -> set[str]:
+    """The local addresses of the UDP sockets process ``pid`` holds (its network namespace's /proc tables)."""
+    inodes = set()
+    for fd in os.listdir(f"/proc/{pid}/fd"):
+        with contextlib.suppress(OSError):
+            target = os.readlink(f"/proc/{pid}/fd/{fd}")
+            if target.startswith("socket:["):
+                inodes.add(target[len("socket:["):-1])
+    found = set()
+    for table in ("udp", "udp6"):
+        for line in Path(f"/proc/{pid}/net/{table}").read_text().splitlines()[1:]:
+            fields = line.split()
+            if fields[9] in inodes:
+                words = fields[1].split(":")[0]
+                packed = b"".join(struct.pack("=I", int(words[i:i + 8], 16)) for i in range(0, len(words), 8))
+                found.add(str(ipaddress.ip_address(packed)))
+    return found
+
+
+EXPECTED_LINE = {
+    "dds": "DDS discovery LOCALHOST: this host only, Cyclone DDS on the loopback interface)",
+    "rclpy": "DDS discovery LOCALHOST: this host only, Fast DDS bound to loopback (fastdds_loopback.xml); ",
+}
+"""What the bridge logs about its discovery on its defaults, per runtime."""
+
+
+def test_the_bridge_on_its_defaults_cannot_be_reached_from_another_host(
+        hosts: Hosts, runtime: tuple[str, str, dict[str, str]]) -> None:
+    bridge = start_bridge(hosts, runtime)
     try:
+        sockets = udp_addresses(bridge.proc.pid)
         bus = listen(hosts)
         remote = [attack(hosts, hosts.b, "plain"), attack(hosts, hosts.b, "plain", unicast_peer(hosts.addr_a))]
+        if runtime[0] == "rclpy":  # the probe's attacker: ROS 2 on Fast DDS naming the car computer as its peer
+            remote.append(attack(hosts, hosts.b, "rclpy", env={"ROS_STATIC_PEERS": hosts.addr_a}, runtime=runtime))
         results = [r.result(ATTACK_S + 30) for r in remote]
         frames = bus.result(ATTACK_S + 30)
-        assert [r["matched"] for r in results] == [0, 0], results  # neither multicast nor unicast discovery
+        assert [r["matched"] for r in results] == [0] * len(remote), results  # no discovery from the other host
         assert frames["command_frames"] > 100 and frames["max_steer"] == 0.0 and frames["max_torque"] == 0.0, frames
         # the same commands from the bridge's own host, on the runtime's defaults, do reach the bus
         bus = listen(hosts)
-        local = attack(hosts, hosts.a, "runtime").result(ATTACK_S + 30)
+        local = attack(hosts, hosts.a, "runtime", runtime=runtime).result(ATTACK_S + 30)
         frames = bus.result(ATTACK_S + 30)
         assert local["matched"] >= 1, local
         assert frames["max_steer"] == pytest.approx(0.3, abs=1e-3) and frames["max_torque"] > 100.0, frames
     finally:
         stop(bridge.proc)
-    assert "DDS discovery LOCALHOST: this host only, bound to loopback" in "".join(bridge.lines)
+    assert EXPECTED_LINE[runtime[0]] in "".join(bridge.lines), "".join(bridge.lines)
+    assert hosts.addr_a not in sockets, sockets  # no socket bound to the address the other host can reach
+    if runtime[0] == "rclpy":  # on Fast DDS, every socket on loopback (Cyclone DDS listens on 0.0.0.0: Trust model)
+        assert sockets and sockets <= {"127.0.0.1", BUS_GROUP}, sockets
 
 
 @pytest.mark.parametrize("opt_in", ["subnet", "static_peer"])
-def test_the_opt_in_reaches_the_bridge_from_another_host(hosts: Hosts, opt_in: str) -> None:
+def test_the_opt_in_reaches_the_bridge_from_another_host(hosts: Hosts, runtime: tuple[str, str, dict[str, str]],
+                                                         opt_in: str) -> None:
     """``SUBNET``: multicast discovery on the link; ``ROS_STATIC_PEERS``: the named host only (unicast)."""
     if opt_in == "subnet":
         env, config = {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}, ""
     else:
         env, config = {"ROS_STATIC_PEERS": hosts.addr_b}, unicast_peer(hosts.addr_a)
-    bridge = start_bridge(hosts, env)
+    bridge = start_bridge(hosts, runtime, env)
     try:
         bus = listen(hosts)
         remote = attack(hosts, hosts.b, "plain", config).result(ATTACK_S + 30)
@@ -267,3 +335,4 @@ def test_the_opt_in_reaches_the_bridge_from_another_host(hosts: Hosts, opt_in: s
         stop(bridge.proc)
     assert remote["matched"] >= 1, remote
     assert frames["max_steer"] == pytest.approx(0.3, abs=1e-3) and frames["max_torque"] > 100.0, frames
+    assert "bound to loopback" not in "".join(bridge.lines) and "loopback interface" not in "".join(bridge.lines)

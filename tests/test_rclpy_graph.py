@@ -203,6 +203,12 @@ def test_full_graph_on_rclpy_reproduces_the_lockstep_outcome_and_is_what_ros2_sh
     assert summary["runtime"] == {**{n: "rclpy" for n in nodes}, "moose_monitor": "rclpy"}
     check_outcome(summary, lockstep())
     assert "starting without" not in result.stdout  # every node announced itself on /diagnostics in time
+    # every node confined on Fast DDS: each checked that its participant's UDP sockets are all on 127.0.0.1
+    for name in nodes:
+        started = [line for line in (result.stdout + result.stderr).splitlines()
+                   if f"[{name}]" in line and f"{name} started (DDS discovery" in line]
+        assert started and "Fast DDS bound to loopback (fastdds_loopback.xml); " in started[0], (name, started)
+        assert started[0].rstrip().endswith("UDP sockets, all on 127.0.0.1)"), started[0]
 
     # the summary and the bag, both from the rclpy monitor, agree; the bag read with rosbags alone
     odom = read_odometry(bag)

@@ -34,7 +34,7 @@ setup(
     install_requires=["moose-avoidance", "cyclonedds>=0.10.5", "rosbags>=0.10", "mcap>=1.1", "numpy>=1.24",
                       "pyyaml>=6.0", "python-can>=4.3", "matplotlib>=3.7", "foxglove-sdk>=0.14"],
     extras_require={"parquet": ["pyarrow>=12"]},  # moose bag export --format parquet
-    package_data={PACKAGE: ["msg/*.msg"]},
+    package_data={PACKAGE: ["msg/*.msg", "runtime/*.xml"]},  # the .msg files; the Fast DDS profile
     zip_safe=False,  # the .msg files are read from the installed package folder
     maintainer="moose-avoidance maintainers",
     maintainer_email="maintainers@moose-avoidance.invalid",

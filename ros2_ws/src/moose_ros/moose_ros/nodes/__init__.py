@@ -81,7 +81,7 @@ def run(name: str, argv: Sequence[str] = ()) -> int:
     watch_parent(_parent_gone)
     node = cls(rt)
     node.publish_diagnostics()  # announce: the simulator starts the clock when every node has
-    rt.log_info(f"{name} started (DDS discovery {rt.discovery.describe()})")
+    rt.log_info(f"{name} started (DDS discovery {rt.describe_discovery()})")
     try:
         rt.spin()
     except KeyboardInterrupt:

@@ -201,6 +201,10 @@ class NodeBase:
         return self._params
 
     # -- introspection ---------------------------------------------------------------
+    def describe_discovery(self) -> str:
+        """How far this node's DDS discovery reaches and how that is held (one line for the log)."""
+        raise NotImplementedError
+
     def endpoints(self) -> list[Endpoint]:
         """The publishers and subscriptions this node created (the runtime's ``/clock`` reader included)."""
         return list(self._endpoints)

@@ -190,6 +190,9 @@ class DdsNode(NodeBase):
                          Policy.WriterDataLifecycle(autodispose=False)]
         return DdsQos(*policies)
 
+    def describe_discovery(self) -> str:
+        return self.discovery.describe()
+
     def publisher(self, type_name: str, topic: str, qos: Qos = QOS_DEFAULT) -> Publisher:
         from cyclonedds.pub import DataWriter
 

@@ -1,21 +1,29 @@
 """How far DDS discovery reaches: ROS 2's ``ROS_AUTOMATIC_DISCOVERY_RANGE`` and ``ROS_STATIC_PEERS`` as
-Cyclone DDS settings, confined to this host unless the user opts in.
+Cyclone DDS settings and as a Fast DDS profile, confined to this host unless the user opts in.
 
 The variables mean what they mean to ROS 2 Jazzy (rcl reads them, rmw_cyclonedds maps them to a
-configuration fragment that it puts *before* ``CYCLONEDDS_URI``), with two differences that keep a
-graph that can steer a car off the network by default:
+configuration fragment that it puts *before* ``CYCLONEDDS_URI``, rmw_fastrtps to participant settings),
+with two differences that keep a graph that can steer a car off the network by default:
 
 - **The default is ``LOCALHOST``**, not ROS 2's ``SUBNET``: an unset or empty variable confines
   discovery to this host.  ``SUBNET`` (multicast discovery on the local network), ``SYSTEM_DEFAULT``
-  (Cyclone DDS's own defaults, i.e. only ``CYCLONEDDS_URI``) and ``OFF`` (no discovery at all, not
-  even between processes of this host) are explicit opt-ins.  A value ROS 2 does not know is an
+  (the middleware's own defaults, for Cyclone DDS only ``CYCLONEDDS_URI``) and ``OFF`` (no discovery at
+  all, not even between processes of this host) are explicit opt-ins.  A value ROS 2 does not know is an
   error here (rcl warns and assumes ``LOCALHOST``).  The deprecated ``ROS_LOCALHOST_ONLY=1`` still
   forces ``LOCALHOST`` and drops the static peers, as in rcl.
-- **``LOCALHOST`` also binds Cyclone DDS to the loopback interface** (``127.0.0.1``) when there
-  are no static peers and ``CYCLONEDDS_URI`` names no interface.  rmw_cyclonedds' ``LOCALHOST``
-  only turns multicast off and adds ``localhost`` as a peer, so a participant on another host that
-  names this host as its peer is still discovered and matched; bound to loopback it is not (both
-  are tested from a second network namespace in tests/test_network_confinement.py).
+- **``LOCALHOST`` without static peers is bound to loopback**, on every runtime.  ROS 2's ``LOCALHOST``
+  only turns multicast off and adds ``localhost`` as a peer, so a participant on another host that names
+  this host as its peer is still discovered and matched (both are tested from a second network namespace
+  in tests/test_network_confinement.py):
+
+  - Cyclone DDS (our DDS backend, and rmw_cyclonedds through ``CYCLONEDDS_URI``) is bound to the loopback
+    *interface* (``127.0.0.1``) when ``CYCLONEDDS_URI`` names no interface: it ignores participants whose
+    addresses are not on loopback, but its sockets still listen on all addresses.
+  - Fast DDS (rmw_fastrtps, the rclpy of the Jazzy wheels) gets :data:`FASTDDS_PROFILE`, one UDP transport
+    allow-listed to ``127.0.0.1``: every socket is bound to 127.0.0.1.  rmw_fastrtps' own ``LOCALHOST`` adds
+    a UDP transport on every interface and shared memory to whatever the profile gives, so the node asks
+    rmw_fastrtps for ``SYSTEM_DEFAULT`` and the profile carries the range (:meth:`Discovery.rclpy_environment`),
+    unless ``FASTRTPS_DEFAULT_PROFILES_FILE`` names a profile of the user's.
 
 Settings per range (the fragment that comes first; rmw_cyclonedds' values):
 
@@ -31,19 +39,22 @@ Settings per range (the fragment that comes first; rmw_cyclonedds' values):
 ``CYCLONEDDS_URI`` wins: it is read after the fragment (as rmw_cyclonedds reads it), so any setting it
 makes overrides the range's, and the interfaces and peers it lists are added.  A URI that names a
 network interface replaces the loopback binding: naming ``lo`` keeps the graph on this host, naming
-``eth0`` opens it to that network — which is then the user's explicit choice.
+``eth0`` opens it to that network — which is then the user's explicit choice.  So does a Fast DDS
+profile of the user's (``FASTRTPS_DEFAULT_PROFILES_FILE``) for rmw_fastrtps.
 
 The Cyclone DDS backend passes :meth:`Discovery.cyclone_config` to its domain; the rclpy backend sets
-:meth:`Discovery.ros_environment` before ``rclpy.init`` (ROS 2 applies the range itself, and
-rmw_cyclonedds gets the loopback binding through ``CYCLONEDDS_URI``).  ``python -m
-moose_ros.runtime`` prints the same settings as shell ``export`` lines, for ROS 2 tools
-(``ros2 topic echo``) that should see a confined graph.
+:meth:`Discovery.rclpy_environment` while it initialises rclpy and creates its node, and checks afterwards
+that Fast DDS bound no new socket elsewhere (:func:`udp_bindings`).  ``python -m moose_ros.runtime`` prints
+:meth:`Discovery.ros_environment` as shell ``export`` lines, for ROS 2 tools (``ros2 topic echo``) that
+should see a confined graph (the tool itself then has ROS 2's ``LOCALHOST``, not the loopback binding).
 """
 from __future__ import annotations
 
 import dataclasses
+import ipaddress
 import os
 import re
+import struct
 from pathlib import Path
 from typing import Mapping, Optional
 from urllib.parse import unquote, urlparse
@@ -57,6 +68,13 @@ DEFAULT_RANGE = "LOCALHOST"
 MAX_PARTICIPANT_INDEX = 32
 """rmw_cyclonedds' ``MaxAutoParticipantIndex``: processes per domain and host that unicast discovery reaches."""
 LOOPBACK = "127.0.0.1"
+FASTDDS_PROFILE = Path(__file__).with_name("fastdds_loopback.xml")
+"""The Fast DDS profile of ``LOCALHOST`` bound to loopback (shipped with the package)."""
+FASTDDS_PROFILE_VARIABLES = ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")
+"""Where Fast DDS reads its default profiles file: 2.x (ROS 2 Jazzy) and 3.x."""
+FASTDDS_RMWS = ("rmw_fastrtps_cpp", "rmw_fastrtps_dynamic_cpp")
+DEFAULT_RMW = "rmw_fastrtps_cpp"
+"""The RMW implementation of ROS 2 Jazzy when ``RMW_IMPLEMENTATION`` is unset."""
 
 _PEER = re.compile(r"^[A-Za-z0-9._:%\[\]-]+$")
 """A host name or an IPv4/IPv6 address (no characters that could leave the XML attribute)."""
@@ -72,6 +90,10 @@ class Discovery:
     """``CYCLONEDDS_URI`` as given (``""``: unset)."""
     ignored_peers: tuple[str, ...] = ()
     """Static peers the range ignores (``OFF``, ``SYSTEM_DEFAULT``, ``ROS_LOCALHOST_ONLY=1``)."""
+    user_fastdds_profiles: str = ""
+    """``FASTRTPS_DEFAULT_PROFILES_FILE`` (Fast DDS 3: ``FASTDDS_DEFAULT_PROFILES_FILE``) as given; ``""``: unset."""
+    rmw: str = DEFAULT_RMW
+    """The RMW implementation an rclpy node of this process loads (``RMW_IMPLEMENTATION``)."""
 
     @classmethod
     def from_environ(cls, environ: Mapping[str, str] = os.environ) -> "Discovery":
@@ -96,13 +118,21 @@ class Discovery:
             peers, ignored = (), peers
         else:
             ignored = ()
-        return cls(chosen, peers, environ.get("CYCLONEDDS_URI", "").strip(), ignored)
+        profiles = next((environ[v].strip() for v in FASTDDS_PROFILE_VARIABLES if environ.get(v, "").strip()), "")
+        return cls(chosen, peers, environ.get("CYCLONEDDS_URI", "").strip(), ignored, profiles,
+                   environ.get("RMW_IMPLEMENTATION", "").strip() or DEFAULT_RMW)
 
     @property
-    def loopback_only(self) -> bool:
+    def cyclone_loopback(self) -> bool:
         """Whether Cyclone DDS is bound to the loopback interface (``LOCALHOST`` without static peers, and
         no interface named in ``CYCLONEDDS_URI``)."""
         return self.range == "LOCALHOST" and not self.static_peers and not names_interface(self.user_uri)
+
+    @property
+    def fastdds_loopback(self) -> bool:
+        """Whether an rclpy node on Fast DDS gets :data:`FASTDDS_PROFILE` (``LOCALHOST`` without static peers, and
+        no profiles file of the user's)."""
+        return self.range == "LOCALHOST" and not self.static_peers and not self.user_fastdds_profiles
 
     def _loopback(self) -> str:
         return f'<General><Interfaces><NetworkInterface address="{LOOPBACK}"/></Interfaces></General>'
@@ -122,7 +152,7 @@ class Discovery:
             body = (general + f"<Discovery><ParticipantIndex>auto</ParticipantIndex>"
                     f"<MaxAutoParticipantIndex>{MAX_PARTICIPANT_INDEX}</MaxAutoParticipantIndex>"
                     + (f"<Peers>{listed}</Peers>" if listed else "") + "</Discovery>")
-            if self.loopback_only:
+            if self.cyclone_loopback:
                 body = self._loopback() + body
         return f"<CycloneDDS><Domain>{body}</Domain></CycloneDDS>"
 
@@ -133,31 +163,81 @@ class Discovery:
         return ",".join(parts) if parts else None
 
     def ros_environment(self) -> dict[str, str]:
-        """The environment a ROS 2 process (rclpy, ``ros2`` tools) needs for the same settings: the range,
-        and ``CYCLONEDDS_URI`` with the loopback binding in front of the user's (rmw_cyclonedds reads it
-        after its own fragment for the range; other RMWs ignore it)."""
+        """The environment a ROS 2 tool (``ros2 topic echo``) needs to see a graph with these settings: the range,
+        and ``CYCLONEDDS_URI`` with the loopback binding in front of the user's (rmw_cyclonedds reads it after its
+        own fragment for the range; other RMWs ignore it)."""
         env = {"ROS_AUTOMATIC_DISCOVERY_RANGE": self.range}
         if self.static_peers:
             env["ROS_STATIC_PEERS"] = ";".join(self.static_peers)
-        if self.loopback_only:
+        if self.cyclone_loopback:
             loopback = f"<CycloneDDS><Domain>{self._loopback()}</Domain></CycloneDDS>"
             env["CYCLONEDDS_URI"] = ",".join(p for p in (loopback, self.user_uri) if p)
         return env
 
-    def describe(self) -> str:
-        """One line for the log: the range, where it reaches, and what ``CYCLONEDDS_URI`` adds."""
+    def rclpy_environment(self) -> dict[str, str]:
+        """The environment under which an rclpy node of this project initialises rclpy and creates its node: on
+        Fast DDS, confined to loopback, the range ``SYSTEM_DEFAULT`` (rmw_fastrtps adds nothing) with
+        :data:`FASTDDS_PROFILE` as the default profile and no ``DEFAULT_FASTRTPS_PROFILES.xml`` of the working
+        directory (``SKIP_DEFAULT_XML_FILE``); otherwise :meth:`ros_environment`."""
+        if self.rmw not in FASTDDS_RMWS or not self.fastdds_loopback:
+            return self.ros_environment()
+        return {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SYSTEM_DEFAULT", "SKIP_DEFAULT_XML_FILE": "1",
+                **dict.fromkeys(FASTDDS_PROFILE_VARIABLES, str(FASTDDS_PROFILE))}
+
+    def describe(self, rmw: Optional[str] = None) -> str:
+        """One line for the log: the range, where it reaches, and how it is held: on the Cyclone DDS backend
+        (``rmw`` ``None``) or on an rclpy node's RMW implementation ``rmw``."""
         reach = {"LOCALHOST": "this host only", "SUBNET": "the local network (multicast)",
-                 "SYSTEM_DEFAULT": "Cyclone DDS defaults", "OFF": "this process only"}[self.range]
+                 "SYSTEM_DEFAULT": "the middleware's defaults", "OFF": "this process only"}[self.range]
         text = f"{self.range}: {reach}"
-        if self.loopback_only:
-            text += ", bound to loopback"
+        if rmw in FASTDDS_RMWS:
+            if self.fastdds_loopback:
+                text += f", Fast DDS bound to loopback ({FASTDDS_PROFILE.name})"
+            elif self.user_fastdds_profiles:
+                text += (f", then the Fast DDS profiles of {self.user_fastdds_profiles} (not bound to loopback "
+                         "by moose)")
+        elif rmw in (None, "rmw_cyclonedds_cpp"):
+            if self.cyclone_loopback:
+                text += ", Cyclone DDS on the loopback interface"
+            if self.user_uri:
+                text += ", then CYCLONEDDS_URI" + (" (names network interfaces)" if names_interface(self.user_uri)
+                                                   else "")
+        elif self.range == "LOCALHOST":
+            text += f", ROS 2's own on {rmw} (not bound to loopback by moose)"
         if self.static_peers:
             text += f", static peers {', '.join(self.static_peers)}"
         if self.ignored_peers:
             text += f" (static peers {', '.join(self.ignored_peers)} ignored)"
-        if self.user_uri:
-            text += ", then CYCLONEDDS_URI" + (" (names network interfaces)" if names_interface(self.user_uri) else "")
         return text
+
+
+def udp_bindings() -> Optional[dict[str, tuple[str, int]]]:
+    """The UDP sockets of this process (Linux): socket inode → (local address, port), IPv6 addresses in
+    brackets; ``None`` where ``/proc`` does not tell."""
+    try:
+        inodes = set()
+        for fd in os.listdir("/proc/self/fd"):
+            try:
+                target = os.readlink(f"/proc/self/fd/{fd}")
+            except OSError:  # closed meanwhile
+                continue
+            if target.startswith("socket:["):
+                inodes.add(target[len("socket:["):-1])
+        found: dict[str, tuple[str, int]] = {}
+        for table, size in (("udp", 4), ("udp6", 16)):
+            with open(f"/proc/self/net/{table}", encoding="ascii") as lines:
+                next(lines)
+                for line in lines:
+                    fields = line.split()
+                    if fields[9] in inodes:
+                        address, port = fields[1].split(":")
+                        # /proc prints each 32-bit word of the address as a number in host byte order
+                        packed = b"".join(struct.pack("=I", int(address[i:i + 8], 16)) for i in range(0, 2 * size, 8))
+                        found[fields[9]] = (str(ipaddress.ip_address(packed)) if size == 4
+                                            else f"[{ipaddress.ip_address(packed)}]", int(port, 16))
+        return found
+    except (OSError, StopIteration, IndexError, ValueError):
+        return None
 
 
 def names_interface(uri: str) -> bool:

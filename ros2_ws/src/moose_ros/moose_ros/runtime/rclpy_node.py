@@ -12,22 +12,43 @@ is the simulated time of the last ``/clock`` published before that message.  Tim
 taken before it.
 
 Discovery is ROS 2's own (``ROS_AUTOMATIC_DISCOVERY_RANGE``, ``ROS_STATIC_PEERS``), with this project's
-default: before the node initialises rclpy it sets the variables of :meth:`.discovery.Discovery.ros_environment`
-(``LOCALHOST`` when the range is unset, and for rmw_cyclonedds the loopback binding in ``CYCLONEDDS_URI``),
-so a node started by ``ros2 run``/``ros2 launch`` stays on this host unless the user opts in."""
+default: while the node initialises rclpy and creates its node (the RMW's participant) it sets the variables of
+:meth:`.discovery.Discovery.rclpy_environment` (``LOCALHOST`` when the range is unset: on Fast DDS the profile
+that binds every socket to 127.0.0.1, on rmw_cyclonedds the loopback binding in ``CYCLONEDDS_URI``) and restores
+the environment afterwards, so a node started by ``ros2 run``/``ros2 launch`` stays on this host unless the user
+opts in.  On Fast DDS it then checks that every UDP socket the participant opened is bound to 127.0.0.1, and
+refuses to run otherwise."""
 from __future__ import annotations
 
+import contextlib
 import itertools
 import os
 import time
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Iterator, Optional
 
 from moose.params import ParamError
 
 from .base import Handle, NodeBase, Publisher, check_period, flatten_params, set_dotted
-from .discovery import Discovery
+from .discovery import FASTDDS_PROFILE_VARIABLES, FASTDDS_RMWS, LOOPBACK, Discovery, udp_bindings
 from .names import CLOCK_TOPIC, CLOCK_TYPE
 from .qos import QOS_CLOCK_READER, QOS_DEFAULT, Qos
+
+
+@contextlib.contextmanager
+def _environment(variables: dict[str, str]) -> Iterator[None]:
+    """``os.environ`` with ``variables`` set, restored afterwards (so a process this one starts later reads the
+    user's settings, not the encoding of them for this node's RMW)."""
+    saved = {key: os.environ.get(key) for key in variables}
+    os.environ.update(variables)
+    try:
+        yield
+    finally:
+        for key, value in saved.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
+
 
 MAX_TAKE = 64
 """Messages taken from one subscription per executor turn at most, as the DDS executor takes at most
@@ -46,12 +67,7 @@ class RclpyNode(NodeBase):
 
         super().__init__(name, params_file, overrides or {}, namespace)
         self._rclpy = rclpy
-        self._owns_context = False
         self.discovery = Discovery.from_environ()
-        if not rclpy.ok():
-            os.environ.update(self.discovery.ros_environment())  # read by rcl and the RMW in rclpy.init
-            rclpy.init(args=None)  # sys.argv: `ros2 run/launch` pass --ros-args (params files, remaps) there
-            self._owns_context = True
         # our --params file and overrides become parameter overrides (they win over --ros-args ones),
         # so use_sim_time reaches rclpy's TimeSource when the node is constructed
         given = []
@@ -60,8 +76,22 @@ class RclpyNode(NodeBase):
                 given.append(Parameter(key, value=value))
             except (TypeError, ValueError) as exc:
                 raise ParamError(f"{name}.{key} = {value!r} is invalid for ROS 2 parameters: {exc}") from None
-        self.node = Node(name, namespace=None if self.namespace == "/" else self.namespace, parameter_overrides=given,
-                         automatically_declare_parameters_from_overrides=True)
+        self._owns_context = not rclpy.ok()
+        before = udp_bindings() if self._owns_context else None
+        applied = self.discovery.rclpy_environment() if self._owns_context else {}
+        with _environment(applied):
+            if self._owns_context:  # rcl reads the range in rclpy.init, the RMW its profile with the participant
+                rclpy.init(args=None)  # sys.argv: `ros2 run/launch` pass --ros-args (params files, remaps) there
+            self.node = Node(name, namespace=None if self.namespace == "/" else self.namespace,
+                             parameter_overrides=given, automatically_declare_parameters_from_overrides=True)
+        self.rmw = rclpy.get_rmw_implementation_identifier()
+        try:
+            self._confinement = self._check_confinement(before, applied.get(FASTDDS_PROFILE_VARIABLES[0]))
+        except ParamError:
+            self.node.destroy_node()
+            if self._owns_context:
+                rclpy.try_shutdown()
+            raise
         self._params = {}
         for dotted, parameter in self.node.get_parameters_by_prefix("").items():
             set_dotted(self._params, dotted, parameter.value)
@@ -75,6 +105,28 @@ class RclpyNode(NodeBase):
         self._sequence = itertools.count()
         self._worked = False
         self._condition = lambda: self._worked  # one object: rclpy compares the wait's arguments
+
+    def _check_confinement(self, before: Optional[dict[str, tuple[str, int]]], profile: Optional[str]) -> str:
+        """With a loopback ``profile`` applied on Fast DDS: that every UDP socket opened since ``before`` (this
+        process's sockets before rclpy started) is bound to 127.0.0.1, else a :class:`ParamError`; what was checked,
+        for the log."""
+        if not self._owns_context:
+            return "; rclpy was initialised before this node: its settings are not moose's"
+        if profile is None or self.rmw not in FASTDDS_RMWS:
+            return ""
+        after = udp_bindings()
+        if before is None or after is None:
+            return "; its sockets not checked (no /proc)"
+        opened = [address for inode, address in after.items() if inode not in before]
+        outside = sorted({f"{host}:{port}" for host, port in opened if host != LOOPBACK})
+        if outside:
+            raise ParamError(f"Fast DDS did not apply {profile}: UDP sockets bound to {', '.join(outside)}; refusing "
+                             "to run a node that the network can reach (ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET or "
+                             "ROS_STATIC_PEERS opt in)")
+        return f"; {len(opened)} UDP sockets, all on {LOOPBACK}"
+
+    def describe_discovery(self) -> str:
+        return self.discovery.describe(self.rmw) + self._confinement
 
     @staticmethod
     def _class(type_name: str) -> Any:
