@@ -16,6 +16,7 @@ import pytest
 from moose.canbus.bus import DEFAULT_GROUP
 from moose.canbus.ecu import VehicleEcu
 from moose.canbus.safety import GuardParams
+from moose.planner import MODE_PLANNERS
 from moose.scenario import load_scenario
 from moose_ros.graph import COMMAND_TIMEOUT, GRAPHS, GROUPS, NODES, TOPICS, publishes, subscribes, topic_table
 from moose_ros.launch import node_overrides
@@ -54,6 +55,22 @@ def test_contract_is_consistent() -> None:
     assert {cls().command_timeout for cls in NODE_PARAMETERS.values() if hasattr(cls(), "command_timeout")} == {0.05}
 
 
+@pytest.mark.parametrize("mode", ["msf", "aeb", "max_steer"])
+def test_the_msf_planner_node_runs_the_planner_of_its_mode(mode: str) -> None:
+    """The feed-forward slot of the graph: the MSF planner, or the baseline of a baseline mode."""
+    rt = DdsNode("msf_planner", overrides={"use_sim_time": True, "scenario": "paper_v5_tau3",
+                                           "simulation.planner": mode})
+    node = None
+    try:
+        node = node_class("msf_planner")(rt)
+        assert type(node.planner).__name__ == {"aeb": "AebPlanner", "max_steer": "MaxSteerPlanner"}.get(mode,
+                                                                                                     "MsfPlanner")
+    finally:
+        if node is not None:
+            node.close()
+        rt.shutdown()
+
+
 def _node_endpoints(name: str, tmp_path: Path) -> set[tuple[str, str, str, object]]:
     overrides = {"use_sim_time": name != "vehicle_simulator", "scenario": "paper_v5_tau3"}
     if name == "can_bridge":
@@ -88,7 +105,7 @@ def _launch_file(name: str) -> Any:
 
 
 @pytest.mark.parametrize("with_simulator", [True, False])
-@pytest.mark.parametrize("planner", ["combined", "mpc", "msf"])
+@pytest.mark.parametrize("planner", list(MODE_PLANNERS))
 def test_ros2_launch_file_starts_what_moose_launch_starts(with_simulator: bool, planner: str) -> None:
     """``ros2 launch moose_ros moose_graph.launch.py``, whole or one ECU group per launch (docker compose):
     the nodes of ``moose launch``'s graph (``full``, or ``car`` without the simulator) with its parameters."""
@@ -97,7 +114,8 @@ def test_ros2_launch_file_starts_what_moose_launch_starts(with_simulator: bool, 
     graph = "full" if with_simulator else "car"
     started = {group: graph_launch.node_parameters(group, with_simulator, scenario, planner)
                for group in ["all", *GROUPS]}
-    expected = [n for n in GRAPHS[graph] if n != {"mpc": "msf_planner", "msf": "mpc_planner"}.get(planner)]
+    unused = {"mpc": "msf_planner", "msf": "mpc_planner", "aeb": "mpc_planner", "max_steer": "mpc_planner"}
+    expected = [n for n in GRAPHS[graph] if n != unused.get(planner)]  # a baseline runs in the MSF planner's slot
     assert list(started["all"]) == expected
     by_group = [name for group in GROUPS for name in started[group]]
     assert sorted(by_group) == sorted(expected)  # every node once, whichever way the groups are launched

@@ -17,12 +17,13 @@ PAST = PlannerInput(2.4, StateEstimate(2.4, 17.0, 2.3, 0.05, 7.0, 0.1, 0.0, 0.0)
 
 
 def planner(name: str) -> Planner:
-    built = getattr(PlanningStep(CONFIG, "combined"), name)
+    """The MPC or MSF planner of the combined mode, or a baseline (in the MSF planner's slot of its mode)."""
+    built = PlanningStep(CONFIG, "combined").mpc if name == "mpc" else PlanningStep(CONFIG, name).msf
     assert built is not None
     return built
 
 
-@pytest.mark.parametrize("name", ["mpc", "msf"])
+@pytest.mark.parametrize("name", ["mpc", "msf", "aeb", "max_steer"])
 def test_after_reset_a_planner_plans_as_a_new_one(name: str) -> None:
     used, new = planner(name), planner(name)
     used.plan(EVADING)

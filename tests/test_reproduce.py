@@ -45,6 +45,14 @@ def test_every_scenario_runs_with_every_planner(runs: list[Run]) -> None:
         assert r.summary["complete"]
 
 
+def test_other_planners_run_beside_the_papers_without_a_claim() -> None:
+    """``moose reproduce --planner aeb,combined``: the baseline is added (no MPC solver), combined is not run twice."""
+    added = run_all(load_config(), scenarios=("paper_v7_tau1.4",), planners=["aeb", "combined"])
+    assert [r.label for r in added] == ["combined", "msf", "mpc (paper_sqp)", f"mpc ({load_config().mpc.solver})",
+                                        "aeb"]
+    assert added[-1].solver == "" and added[-1].summary["outcome"] == "collision"
+
+
 def block(name: str, path: Path = DESIGN) -> str:
     text = path.read_text(encoding="utf-8")
     match = re.search(rf"<!-- BEGIN {name} -->\n(.*?)<!-- END {name} -->", text, re.S)

@@ -18,6 +18,7 @@ from typing import Any, Callable, Iterable, Literal, Optional, Sequence, Union
 from .metrics import summarize
 from .paper import PAPER_FRICTION
 from .params import ParamError
+from .planner import MODE_PLANNERS
 from .scenario import load_scenario
 from .schema import Config, PlannerMode, SolverName
 from .simulation import simulate
@@ -50,7 +51,7 @@ class Run:
     scenario: str
     planner: str
     solver: str
-    """The MPC solver (empty for the MSF planner alone)."""
+    """The MPC solver (empty for a planner without the MPC: the MSF planner alone, a baseline)."""
     summary: dict[str, Any]
 
     @property
@@ -70,8 +71,9 @@ class Claim:
 
 
 def run_all(config: Config, scenarios: Sequence[str] = NINE + COMPARISON, seed: int = 0,
-            progress: Optional[Callable[[str], None]] = None) -> list[Run]:
-    """Every scenario with every planner of :data:`RUNS` at the scenario's friction (the calibrated one).
+            progress: Optional[Callable[[str], None]] = None, planners: Sequence[PlannerMode] = ()) -> list[Run]:
+    """Every scenario with every planner of :data:`RUNS`, and then with each of ``planners`` that :data:`RUNS` does
+    not hold (the baselines: rows of the results, no claim), at the scenario's friction (the calibrated one).
 
     The claims are judged with the default verdict limits: a configuration with others is a
     :class:`~moose.params.ParamError` naming them, before any run."""
@@ -79,13 +81,14 @@ def run_all(config: Config, scenarios: Sequence[str] = NINE + COMPARISON, seed: 
     if changed:
         raise ParamError(f"verdict: {changed}: the paper's claims are judged with the default verdict limits")
     runs = []
+    extra = [(p, None) for p in dict.fromkeys(planners) if p not in {planner for planner, _ in RUNS}]
     for name in scenarios:
         scenario = dataclasses.replace(load_scenario(name), duration=DURATION)
-        for planner, solver in RUNS:
+        for planner, solver in (*RUNS, *extra):
             cfg = config
             if planner == "mpc" and solver:
                 cfg = dataclasses.replace(config, mpc=dataclasses.replace(config.mpc, solver=solver))
-            label_solver = cfg.mpc.solver if planner != "msf" else ""
+            label_solver = cfg.mpc.solver if "mpc" in MODE_PLANNERS[planner] else ""
             if progress is not None:
                 progress(f"{name} {planner} {label_solver}")
             summary = summarize(simulate(cfg, scenario, planner=planner, seed=seed))

@@ -486,7 +486,7 @@ class ManeuverParams:
         check("t_max", self.t_max, lambda v: v >= 2 * self.dt_table, f"at least two table steps of {self.dt_table} s")
 
 
-PlannerMode = Literal["combined", "mpc", "msf"]
+PlannerMode = Literal["combined", "mpc", "msf", "aeb", "max_steer"]
 PLANNER_MODES: tuple[str, ...] = get_args(PlannerMode)
 """The planner modes, for command-line choices."""
 
@@ -519,7 +519,8 @@ class SimulationParams:
     motion_rate_hz: float = 100.0
     """Motion control, observer and detector rate (Hz)."""
     planner: PlannerMode = "combined"
-    """Which planner drives the car: the paper's blend, MPC alone, or MSF alone."""
+    """Which planner drives the car: the paper's blend, MPC alone, MSF alone, or a baseline (``aeb``: emergency
+    braking; ``max_steer``: full lock; :mod:`moose.planner.baseline`)."""
     steering_fbl_at_motion_rate: bool = True
     """Re-evaluate the FBL's δ* at the motion-control rate on the held planned acceleration."""
 

@@ -115,6 +115,15 @@ def non_negative_int(text: str) -> int:
     return value
 
 
+def planner_list(text: str) -> list[str]:
+    """argparse type: planner modes separated by commas, each one of :data:`moose.schema.PLANNER_MODES`."""
+    names = [name.strip() for name in text.split(",")]
+    for name in names:
+        if name not in PLANNER_MODES:
+            raise argparse.ArgumentTypeError(f"{name!r} is not a planner: expected one of {', '.join(PLANNER_MODES)}")
+    return names
+
+
 def check_output_file(flag: str, path: Optional[str], suffixes: Optional[Sequence[str]] = None) -> Optional[Path]:
     """``path`` as the output file of ``flag``, checked before any work starts (so nothing is lost at the end of a
     run): not empty, not a directory, a known suffix (when ``suffixes`` are given), and actually writable — its

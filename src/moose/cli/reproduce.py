@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from ..params import ParamError
-from .common import add_timing_argument, non_negative_int, run_config
+from .common import add_timing_argument, non_negative_int, planner_list, run_config
 
 
 def add_subparser(subparsers: Any) -> None:
@@ -23,6 +23,9 @@ def add_subparser(subparsers: Any) -> None:
                         help="regenerate the generated blocks this file holds (calibration, results, claims, summary: "
                              "docs/design.md, README.md); may be given more than once")
     parser.add_argument("--json", help="write every run's summary as JSON to this path")
+    parser.add_argument("--planner", metavar="P[,P...]", type=planner_list,
+                        help="also run these planners (e.g. the baselines aeb,max_steer): rows of the results and of "
+                             "--json, no claim; the paper's planners always run")
     parser.add_argument("--set", action="append", default=[], metavar="GROUP.KEY=VALUE",
                         help="change one parameter of the configuration, e.g. timing.compensate=true (repeatable)")
     add_timing_argument(parser)
@@ -55,7 +58,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     if args.json is not None and not Path(args.json).parent.is_dir():
         raise ParamError(f"--json = {args.json!r} is invalid: no folder {str(Path(args.json).parent)!r}")
     config = run_config(args, "moose reproduce")
-    runs = run_all(config, seed=args.seed, progress=lambda what: print(f"  {what}", file=sys.stderr, flush=True))
+    runs = run_all(config, seed=args.seed, progress=lambda what: print(f"  {what}", file=sys.stderr, flush=True),
+                   planners=args.planner or ())
     found = claims(runs, config.mpc.solver, config.vehicle.delta_max)
     print(render_claims(found))
     if args.json:

@@ -38,7 +38,8 @@ def add_subparser(subparsers: Any) -> None:
     axes.add_argument("--mu", metavar="VALUES",
                       help="road friction; 'paper' is the calibration that reproduces the paper's nu "
                            "(default: the configuration's vehicle.mu)")
-    axes.add_argument("--planner", metavar="VALUES", help="combined, mpc, msf (default combined)")
+    axes.add_argument("--planner", metavar="VALUES",
+                      help="combined, mpc, msf, or the baselines aeb, max_steer (default combined)")
     axes.add_argument("--seeds", type=int, default=1, help="sensor-noise seeds 0..N-1 (default 1)")
     axes.add_argument("--obstacle-length", metavar="VALUES", help="danger-zone length, m (default 2)")
     axes.add_argument("--duration", metavar="VALUES", help="simulated seconds after the obstacle appears (default 8)")

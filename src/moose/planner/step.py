@@ -8,7 +8,11 @@ node graph reproduces the lockstep loop by construction, not by care.
 
 * Mode: ``combined`` blends the two plans with the weight function (a missing MPC plan — failed,
   late or silent — blends as weight 0, i.e. the MSF plan; a missing MSF plan — a dead or silent MSF
-  planner in the node graph — as weight 1, the MPC plan alone); ``mpc`` and ``msf`` apply one planner.
+  planner in the node graph — as weight 1, the MPC plan alone); ``mpc`` and ``msf`` apply one planner,
+  and so do the baselines ``aeb`` and ``max_steer`` (:mod:`moose.planner.baseline`), which run in the MSF
+  planner's slot and command part of the reference themselves: ``max_steer`` full lock in place of the
+  FBL's δ* (:func:`~moose.planner.commanded_steering`), ``aeb`` v_x* = 0 in place of its v_x*
+  (:func:`~moose.planner.commanded_speed`).
 * The blended first acceleration goes to the FBL (δ*, v_x*); between planning instants δ* is
   re-evaluated at the motion-control rate on the held acceleration with the newest estimate
   (``simulation.steering_fbl_at_motion_rate``), v_x* is held.
@@ -31,7 +35,7 @@ import numpy as np
 from ..schema import Config, PlannerMode
 from ..signals import Blend, PlannerInput, PlanResult, Reference, StateEstimate, Threat
 from ..timing import AccelSchedule, DelayLine, compensated_input, predict
-from . import Planner
+from . import MODE_PLANNERS, Planner, commanded_speed, commanded_steering
 from .fbl import FeedbackLinearization
 from .kinematics import kinematic_rollout
 from .weight import WeightFunction
@@ -81,17 +85,19 @@ class PlanningStep:
         model = config.model_vehicle
         self.fbl = FeedbackLinearization(config.fbl, model, self.grid.t_s)
         self.weight = WeightFunction(config.weight, self.fbl)
+        self.delta_max = model.delta_max
         self.mpc: Optional[Planner] = None
         self.msf: Optional[Planner] = None
-        if planners and self.mode != "msf":
+        """The feed-forward slot: the MSF planner, or the baseline of a baseline mode."""
+        if planners and "mpc" in MODE_PLANNERS[self.mode]:
             from .mpc import MpcPlanner
 
             self.mpc = MpcPlanner(config.mpc, self.grid, compute_time_s=config.timing.planning_delay_s)
-        if planners and self.mode != "mpc":
+        if planners and "msf" in MODE_PLANNERS[self.mode]:
             from ..maneuver import MaxSteeringTable
-            from .msf import MsfPlanner
+            from .baseline import feed_forward_planner
 
-            self.msf = MsfPlanner(config.msf, self.grid, table or MaxSteeringTable.build(model, config.maneuver))
+            self.msf = feed_forward_planner(self.mode, config, table or MaxSteeringTable.build(model, config.maneuver))
         self.fbl_at_motion_rate = config.simulation.steering_fbl_at_motion_rate
         self.timing = config.timing
         self._plans: DelayLine[PlanningRecord] = DelayLine(self.timing.planning_delay_s, config.motion_period)
@@ -134,11 +140,15 @@ class PlanningStep:
             blend = Blend(weight_mpc=1.0, accel=np.array(mpc.accel, dtype=float, copy=True))
         elif msf is None:
             raise ValueError(f"mode {self.mode} needs an MSF plan")
-        elif self.mode == "msf":
+        elif self.mode != "combined":  # the feed-forward slot's planner alone (the MSF planner or a baseline)
             blend = Blend(weight_mpc=0.0, accel=np.array(msf.accel, dtype=float, copy=True))
         else:
             blend = self.weight.blend(mpc, msf, threat, estimate)
         reference = self.fbl.reference(blend.accel[0], estimate)
+        steering, speed = commanded_steering(self.mode, msf, threat, self.delta_max), commanded_speed(self.mode, msf)
+        if steering is not None or speed is not None:  # a baseline's own reference (moose.planner.baseline)
+            reference = Reference(delta=reference.delta if steering is None else steering,
+                                  vx=reference.vx if speed is None else speed)
         delta_mpc = self.fbl.steering(mpc.accel[0], estimate) if mpc is not None else float("nan")
         self.guess = self.weight.next_initial_guess(blend)
         record = PlanningRecord(t, threat, mpc, msf, blend, reference, delta_mpc)
@@ -156,7 +166,8 @@ class PlanningStep:
         acting = self.acting
         if acting is None:
             return None
-        if not self.fbl_at_motion_rate:
+        if not self.fbl_at_motion_rate or commanded_steering(self.mode, acting.msf, acting.threat,
+                                                             self.delta_max) is not None:
             return acting.reference
         if self.timing.compensate:
             estimate = predict(estimate, t + self.timing.command_delay_s, self._in_flight)

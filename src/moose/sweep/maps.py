@@ -48,7 +48,11 @@ COLOURS = {
     "timeout": "#e377c2",
 }
 PLANNER_STYLE: dict[str, tuple[str, LineStyleType]] = {
-    "combined": ("tab:blue", "-"), "mpc": ("tab:red", "--"), "msf": ("tab:purple", ":")}
+    "combined": ("tab:blue", "-"), "mpc": ("tab:red", "--"), "msf": ("tab:purple", ":"), "aeb": ("tab:gray", "-."),
+    "max_steer": ("tab:orange", (0, (5, 1, 1, 1, 1, 1)))}
+PAPER_PLANNERS = ("combined", "mpc", "msf")
+"""The paper's planners: the advantage map compares the combined planner with the two alone (the baselines are
+compared on ``moose benchmark``'s leaderboard)."""
 ADVANTAGE = (
     ("beats both", "#1f77b4"), ("beats MPC alone", "#17becf"), ("beats MSF alone", "#aec7e8"),
     ("all safe", "#d9f0d3"), ("combined worse", "#d62728"), ("none safe", "#bdbdbd"),
@@ -337,7 +341,8 @@ def _boundary(ax: Any, cells: Cells, cellmap: dict, colour: str, style: LineStyl
 
 
 def advantage_map(cells: Cells, facets: Sequence[tuple], path: Path) -> Optional[Path]:
-    if "combined" not in cells.planners or len(cells.planners) < 2:
+    paper = [p for p in cells.planners if p in PAPER_PLANNERS]
+    if "combined" not in paper or len(paper) < 2:
         return None
     from matplotlib.colors import BoundaryNorm, ListedColormap
     from matplotlib.patches import Patch
@@ -348,7 +353,7 @@ def advantage_map(cells: Cells, facets: Sequence[tuple], path: Path) -> Optional
     fig, axes = _figure(len(cells.mus), len(facets))
     for i, mu in enumerate(cells.mus):
         for j, facet in enumerate(facets):
-            maps = {p: cells.cells(mu, p, facet) for p in cells.planners}
+            maps = {p: cells.cells(mu, p, facet) for p in paper}
             merged = {xy: {p: maps[p].get(xy) for p in maps} for xy in maps["combined"]}
 
             def klass(by_planner: dict[str, Any]) -> float:

@@ -39,6 +39,7 @@ import numpy as np
 from moose.config import load_config
 from moose.metrics import summarize
 from moose.params import ParamError, read_ros_params
+from moose.planner import MODE_PLANNERS
 from moose.planner.step import PlanningRecord
 from moose.scenario import Scenario
 from moose.schema import Config, PlannerMode
@@ -170,12 +171,15 @@ def node_overrides(graph: str, planner: str, params: Optional[dict[str, Any]] = 
     ``params`` go to every node that takes them (:mod:`moose_ros.parameters`; dotted keys of the core's
     groups go to all); a key that no node of the graph takes is an error, and so is any parameter that a node
     would refuse (the file's values included), so a bad configuration stops the launch before a node runs.
-    The planner node that ``planner`` does not use is left out.
+    The planner node that ``planner`` does not use is left out (:data:`moose.planner.MODE_PLANNERS`: a baseline runs
+    in ``msf_planner``, without ``mpc_planner``).
     """
     if params_file:
         check_parameter_file(params_file, GRAPHS[graph], graph)
-    nodes = [n for n in GRAPHS[graph] if not (planner == "mpc" and n == "msf_planner")
-             and not (planner == "msf" and n == "mpc_planner")]
+    if planner not in MODE_PLANNERS:
+        raise ParamError(f"planner = {planner!r} is invalid: expected one of {list(MODE_PLANNERS)}")
+    unused = {f"{slot}_planner" for slot in ("mpc", "msf") if slot not in MODE_PLANNERS[planner]}
+    nodes = [n for n in GRAPHS[graph] if n not in unused]
     given = dict(params or {}, **{"simulation.planner": planner})
     simulated = "vehicle_simulator" in nodes
     if simulated:

@@ -1,4 +1,5 @@
-"""``mpc_planner`` and ``msf_planner``: a planner at the planning rate, and at once on a new obstacle."""
+"""``mpc_planner`` and ``msf_planner``: a planner at the planning rate, and at once on a new obstacle (the
+``msf_planner`` node hosts the feed-forward slot: the MSF planner, or a baseline)."""
 from __future__ import annotations
 
 import math
@@ -103,11 +104,13 @@ class MpcPlannerNode(PlannerNode):
 
 
 class MsfPlannerNode(PlannerNode):
-    """The maximum-steering feed-forward planner (no initial guess)."""
+    """The feed-forward planner's slot (no initial guess): the maximum-steering feed-forward planner, or in a
+    baseline mode (``simulation.planner`` ``aeb`` or ``max_steer``) the baseline, which then drives the car alone
+    (:data:`moose.planner.MODE_PLANNERS`)."""
 
     name, kind = "msf_planner", "msf"
 
     def make_planner(self) -> Planner:
-        from moose.planner.msf import MsfPlanner
+        from moose.planner.baseline import feed_forward_planner
 
-        return MsfPlanner(self.config.msf, self.config.grid, self.table())
+        return feed_forward_planner(self.config.simulation.planner, self.config, self.table())

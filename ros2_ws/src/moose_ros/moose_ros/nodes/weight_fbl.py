@@ -15,15 +15,13 @@ from __future__ import annotations
 import math
 from typing import Any, Optional
 
+from moose.planner import MODE_PLANNERS
 from moose.planner.step import PlanningStep, blend_path
 from moose.signals import PlanResult, StateEstimate, Threat
 
 from .. import convert as cv
 from ..graph import BLEND, MARKERS, PLAN_MPC, PLAN_MSF, PLANS, REFERENCE, STATE, THREAT
 from .base import ERROR, WARN, GraphNode
-
-MODE_PLANNERS = {"combined": ("mpc", "msf"), "mpc": ("mpc",), "msf": ("msf",)}
-"""The planners each mode uses."""
 
 
 class WeightFbl(GraphNode):
