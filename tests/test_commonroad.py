@@ -24,8 +24,8 @@ from commonroad.scenario.trajectory import Trajectory
 
 from moose.commonroad import EGO_ID, OBSTACLE_ID, PLANNING_PROBLEM_ID, criticality
 from moose.commonroad.assess import assess
-from moose.commonroad.geometry import Footprint, obstacle_of_zone, zone_of_obstacle
-from moose.commonroad.judge import compare
+from moose.commonroad.geometry import Footprint, obstacle_of_zone, resample, zone_of_obstacle
+from moose.commonroad.judge import check, compare
 from moose.commonroad.scenario import export_run, load, write, write_run
 from moose.config import load_config
 from moose.metrics import summarize
@@ -37,10 +37,12 @@ from moose.verdict import judge as our_verdict
 
 CONFIG = load_config()
 FOOTPRINT = Footprint.of(CONFIG.vehicle)
-SWEEP_SAMPLE = (  # (speed, τ, half width, μ, planner): sweep cases of the paper region, collisions among them
+SWEEP_SAMPLE = (  # (speed, τ, half width, μ, planner): sweep cases of the paper region, collisions and a car that
+    # leaves the road (the baseline max_steer) among them
     (7.0, 1.0, 3.0, 0.33, "msf"), (7.0, 1.0, 3.0, 0.33, "combined"), (8.0, 2.0, 2.5, 0.33, "combined"),
     (5.0, 1.0, 1.0, 0.8, "mpc"), (6.0, 2.5, 4.0, 0.33, "mpc"), (4.0, 1.0, 0.3, 0.8, "msf"),
-    (8.0, 1.0, 2.0, 0.8, "combined"), (6.0, 1.5, 2.5, 0.33, "mpc"),
+    (8.0, 1.0, 2.0, 0.8, "combined"), (6.0, 1.5, 2.5, 0.33, "mpc"), (6.0, 2.5, 2.0, 0.33, "max_steer"),
+    (7.0, 1.5, 1.0, 0.8, "aeb"),
 )
 
 
@@ -202,6 +204,36 @@ def test_the_checker_agrees_with_our_verdict_or_the_difference_is_explained(runs
     assert collisions >= 2
 
 
+def checker_from_export(result: SimulationResult) -> tuple[np.ndarray, np.ndarray]:
+    """The checker's answers per time step from its own construction of the exported run's shapes: the ego's
+    time-variant collision object, the obstacle's, and the road boundary of the lanelets."""
+    from commonroad_dc.boundary.boundary import create_road_boundary_obstacle
+    from commonroad_dc.collision.collision_detection.pycrcc_collision_dispatch import create_collision_object
+
+    exported = export_run(result.trace, result.scenario, result.config.vehicle, None)
+    ego, obstacle = create_collision_object(exported.ego), create_collision_object(exported.obstacle)
+    _, boundary = create_road_boundary_obstacle(exported.scenario, method="obb_rectangles")
+    at = [ego.obstacle_at_time(k) for k in range(ego.time_end_idx() + 1)]
+    return (np.array([a.collide(obstacle) for a in at], dtype=bool),
+            np.array([boundary.collide(a) for a in at], dtype=bool))
+
+
+def test_the_judge_s_shapes_give_the_checker_s_answers_at_every_time_step(runs: dict) -> None:
+    """The judge builds the checker's shapes from the run directly and asks it only where a contact is possible; at
+    every time step of the paper's cases, the comparison cases and the sweep sample (collisions, cars off the road
+    among them) its answers are those of the checker's own construction from the export."""
+    contacts = offs = 0
+    for name, result in runs.items():
+        states = resample(result.trace)
+        box, _ = obstacle_of_zone(result.scenario.danger_zone, FOOTPRINT)
+        hits, off = check(states, box, result.scenario.field, FOOTPRINT)
+        expected_hits, expected_off = checker_from_export(result)
+        np.testing.assert_array_equal(hits, expected_hits, err_msg=name)
+        np.testing.assert_array_equal(off, expected_off, err_msg=name)
+        contacts, offs = contacts + int(hits.sum()), offs + int(off.sum())
+    assert contacts > 0 and offs > 0
+
+
 def test_a_yawed_footprint_touching_the_obstacle_is_a_difference_with_its_reason() -> None:
     """A car driving yawed along the zone's side, its CoG just outside the zone: only its corner reaches the
     obstacle.  Built by hand, so the geometry (not a planner) decides."""
@@ -214,7 +246,7 @@ def test_a_yawed_footprint_touching_the_obstacle_is_a_difference_with_its_reason
     trace = {"t": t, "x": x, "y": y, "theta": theta, "vx": np.full_like(t, 2.5), "vy": np.zeros_like(t)}
     ours = our_verdict(t, x, y, theta, trace["vx"], trace["vy"], zone, scenario.field, t[-1])
     assert not ours.collided
-    independent = compare(export_run(trace, scenario, CONFIG.vehicle, 0.0), trace, ours)
+    independent = compare(trace, scenario, CONFIG.vehicle, ours)
     assert independent.collision and not independent.agrees and independent.explained
     assert "yawed -0.250 rad" in independent.differences[0] and "outside the danger zone" in independent.differences[0]
 

@@ -20,22 +20,21 @@ def assess(result: Any, verdict: Any, criticality: bool) -> tuple[Optional[dict[
     if not available():
         missing = f"the CommonRoad packages are not installed: {INSTALL}"
         return None, None, {"commonroad_verdict": missing, "criticality": missing if criticality else not_asked}
-    from . import criticality as crime
     from . import judge
-    from .scenario import export_run
 
     notes: dict[str, str] = {}
-    trace, first = result.trace, result.first_threat
+    trace = result.trace
     independent: Optional[dict[str, Any]] = None
     finite = np.all([np.isfinite(np.asarray(trace[k], dtype=float)) for k in ("t", "x", "y", "theta", "vx", "vy")],
                     axis=0)
     if np.any(finite):
-        exported = export_run(trace, result.scenario, result.config.vehicle, first.t if first is not None else None)
-        independent = judge.compare(exported, trace, verdict).as_dict()
+        independent = judge.compare(trace, result.scenario, result.config.vehicle, verdict).as_dict()
     else:
         notes["commonroad_verdict"] = "no finite sample of the vehicle state to judge"
     measures: Optional[dict[str, float]] = None
-    if criticality:
+    if criticality:  # commonroad-crime takes seconds to import: only when asked
+        from . import criticality as crime
+
         measures = dict(crime.measures(result.scenario, result.config.vehicle))
         for key, value in measures.items():
             if math.isinf(value):

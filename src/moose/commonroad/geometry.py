@@ -19,15 +19,19 @@ either end (the independent verdict explains the differences this makes).
 from __future__ import annotations
 
 import dataclasses
-from typing import Optional
+import math
+from typing import Any, Mapping, Optional
 
 import numpy as np
 
-from ..params import VehicleParams
+from ..params import ParamError, VehicleParams
 from ..signals import Obstacle as Box
 
 MIN_SIZE = 0.01
 """Side of the post that stands for a zone smaller than the car (m)."""
+DT = 0.01
+"""The time step of a run as CommonRoad sees it (s): the trace's, the motion-control rate (nothing recorded is
+dropped); time step k is the run's time k·dt."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -52,6 +56,15 @@ class Footprint:
     def rear(self) -> float:
         """CoG to the rear bumper (m)."""
         return 0.5 * self.length - self.offset
+
+    @property
+    def radius(self) -> float:
+        """Half the diagonal: the circle about :meth:`centre` with this radius holds the whole footprint (m)."""
+        return math.hypot(0.5 * self.length, 0.5 * self.width)
+
+    def centre(self, x: Any, y: Any, theta: Any) -> tuple[Any, Any]:
+        """The footprint's centre for the CoG at (x, y) with yaw θ (floats or arrays)."""
+        return x + self.offset * np.cos(theta), y + self.offset * np.sin(theta)
 
     def corners(self, x: float, y: float, theta: float) -> np.ndarray:
         """(4, 2) corners of the footprint with the CoG at (x, y) and yaw ``theta`` (counter-clockwise)."""
@@ -92,3 +105,23 @@ def obstacle_of_zone(zone: Box, footprint: Footprint) -> tuple[Box, Optional[str
             f"obstacle; the obstacle is {MIN_SIZE:g} m thick along that axis, its danger zone overhangs the given "
             "one equally at both ends")
     return Box(x_min, x_max, y_min, y_max), note
+
+
+def resample(trace: Mapping[str, np.ndarray], dt: float = DT) -> dict[str, np.ndarray]:
+    """The trace's t, x, y, θ, v_x, v_y (and δ, γ where it has them) on the grid k·dt from 0 to its last sample
+    (linear in time, θ unwrapped first; samples with a non-finite value are left out): the samples themselves
+    where they lie on the grid, as a lockstep trace's do."""
+    names = [n for n in ("x", "y", "theta", "vx", "vy", "delta", "gamma") if n in trace]
+    t = np.asarray(trace["t"], dtype=float)
+    columns = {n: np.asarray(trace[n], dtype=float) for n in names}
+    ok = np.isfinite(t) & np.all([np.isfinite(columns[n]) for n in names], axis=0)
+    if not np.any(ok):
+        raise ParamError("the run has no finite sample of the vehicle state to export")
+    order = np.argsort(t[ok], kind="stable")
+    t = t[ok][order]
+    grid = np.arange(int(math.floor(t[-1] / dt + 1e-9)) + 1) * dt
+    out = {"t": grid}
+    for n in names:
+        values = columns[n][ok][order]
+        out[n] = np.interp(grid, t, np.unwrap(values) if n == "theta" else values)
+    return out

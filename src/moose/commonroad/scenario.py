@@ -51,10 +51,8 @@ from ..params import ParamError, VehicleParams
 from ..scenario import V_MAX_FIELD, Scenario
 from ..signals import Obstacle as Box
 from . import EGO_ID, OBSTACLE_ID, PLANNING_PROBLEM_ID
-from .geometry import Footprint, obstacle_of_zone, zone_of_obstacle
+from .geometry import DT, Footprint, obstacle_of_zone, resample, zone_of_obstacle
 
-DT = 0.01
-"""The exported scenario's time step (s): the trace's, the motion-control rate."""
 VERTEX_SPACING = 1.0
 """Distance between a lanelet's vertices (m): commonroad-crime smooths and projects onto them."""
 STRAIGHT_TOLERANCE = 0.01
@@ -89,26 +87,6 @@ class Exported:
     """Why the obstacle's danger zone is not the run's (a zone shorter or narrower than the car), or None."""
 
 
-def resample(trace: Mapping[str, np.ndarray], dt: float = DT) -> dict[str, np.ndarray]:
-    """The trace's t, x, y, θ, v_x, v_y (and δ, γ where it has them) on the grid k·dt from 0 to its last sample
-    (linear in time, θ unwrapped first; samples with a non-finite value are left out): the samples themselves
-    where they lie on the grid, as a lockstep trace's do."""
-    names = [n for n in ("x", "y", "theta", "vx", "vy", "delta", "gamma") if n in trace]
-    t = np.asarray(trace["t"], dtype=float)
-    columns = {n: np.asarray(trace[n], dtype=float) for n in names}
-    ok = np.isfinite(t) & np.all([np.isfinite(columns[n]) for n in names], axis=0)
-    if not np.any(ok):
-        raise ParamError("the run has no finite sample of the vehicle state to export")
-    order = np.argsort(t[ok], kind="stable")
-    t = t[ok][order]
-    grid = np.arange(int(math.floor(t[-1] / dt + 1e-9)) + 1) * dt
-    out = {"t": grid}
-    for n in names:
-        values = columns[n][ok][order]
-        out[n] = np.interp(grid, t, np.unwrap(values) if n == "theta" else values)
-    return out
-
-
 def lanelets(field: Box, zone: Box) -> LaneletNetwork:
     """Straight lanelets along x over the field, split at the zone's lateral edges, numbered 1, 2, … from the
     right, each the left neighbour (same direction) of the one before."""
@@ -138,11 +116,6 @@ def static_obstacle(box: Box) -> StaticObstacle:
                      orientation=0.0, velocity=0.0, acceleration=0.0, yaw_rate=0.0, slip_angle=0.0))
 
 
-def _centre(footprint: Footprint, x: Any, y: Any, theta: Any) -> tuple[Any, Any]:
-    """The footprint's centre for the CoG at (x, y) with yaw θ."""
-    return x + footprint.offset * np.cos(theta), y + footprint.offset * np.sin(theta)
-
-
 def export_run(trace: Mapping[str, np.ndarray], scenario: Scenario, vehicle: VehicleParams,
                detection_t: Optional[float], dt: float = DT) -> Exported:
     """The run (its trace of the true state: t, x, y, θ, v_x, v_y, δ) as a CommonRoad scenario and planning
@@ -155,7 +128,7 @@ def export_run(trace: Mapping[str, np.ndarray], scenario: Scenario, vehicle: Veh
                     author="moose", source=f"moose test {scenario.name}")
     cr.add_objects(lanelets(scenario.field, zone))
     obstacle = static_obstacle(box)
-    cx, cy = _centre(footprint, states["x"], states["y"], states["theta"])
+    cx, cy = footprint.centre(states["x"], states["y"], states["theta"])
     speed = np.hypot(states["vx"], states["vy"])
     slip = np.arctan2(states["vy"], states["vx"])
     steps = len(states["t"])
