@@ -2,7 +2,8 @@
 
 Built in: ``simulate`` (one moose test in lockstep, :mod:`.simulate`), ``reproduce`` (the
 paper's cases and claims, :mod:`.reproduce`), ``sweep`` (many moose tests and their maps,
-:mod:`.sweep`) and ``can`` (vehicle-bus tools, :mod:`.can`).  Other packages add commands
+:mod:`.sweep`), ``budget`` (the latency budget of the paper's cases, :mod:`.budget`) and ``can``
+(vehicle-bus tools, :mod:`.can`).  Other packages add commands
 through entry points (:mod:`.plugins`); the node graph's ``node``, ``launch`` and ``bag``
 come with moose_ros.  Bad input ends with ``moose: error: …`` naming the field and the
 value, and exit status 2; Ctrl-C with 130 (:mod:`moose.cli.common` lists every exit
@@ -17,7 +18,7 @@ import sys
 from typing import Callable, Sequence
 
 from ..params import ParamError
-from . import can, reproduce, simulate, sweep
+from . import budget, can, reproduce, simulate, sweep
 from .common import DEFAULT_SCENARIO, EXIT_BAD_INPUT, EXIT_INTERRUPTED, INTERRUPTS
 from .plugins import add_plugin_commands
 
@@ -33,6 +34,7 @@ def build_parser() -> argparse.ArgumentParser:
     can.add_subparser(sub)
     reproduce.add_subparser(sub)
     sweep.add_subparser(sub)
+    budget.add_subparser(sub)
     add_plugin_commands(sub)
     return parser
 
