@@ -47,8 +47,16 @@ def assert_safe(s: dict[str, Any]) -> None:
     assert s["max_abs_sideslip_rad"] < 0.35
 
 
-@pytest.mark.parametrize("seed", [0, 1])
-@pytest.mark.parametrize("name", NINE)
+EXTREME_AT_THE_EDGE = pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+    "paper claim (Dodging the Moose, Sec. VI-C): at tau = 1.4 s, nu = 0.95 the combined planner avoids the "
+    "obstacle.  With the car's latency chain (the default timing, 40 ms from sample to actuator) the margin is "
+    "gone: seed 0 passes with 0.02 m, seed 1 collides (-0.02 m); seeds 0-9 collide in 7 of 10 (-0.04 to +0.03 m), "
+    "while all ten pass with --timing ideal (docs/design.md, 'Latency budget')"))
+
+
+@pytest.mark.parametrize("name, seed", [
+    pytest.param(name, seed, marks=[EXTREME_AT_THE_EDGE] if (name, seed) == ("paper_v7_tau1.4", 1) else [])
+    for seed in (0, 1) for name in NINE])
 def test_paper_case_at_the_calibrated_friction(config: Config, name: str, seed: int) -> None:
     s = run(config, name, seed=seed)
     assert s["mu"] == s["mu_planning"] == PAPER_FRICTION  # one friction: the road's is the stack's

@@ -149,21 +149,24 @@ def render_table(found: Sequence[Budget], config: Config, step_s: float) -> str:
     return "\n".join(lines)
 
 
-def render_summary(found: Sequence[Budget], points: Sequence[Point], config: Config, case: str) -> str:
+def render_summary(found: Sequence[Budget], points: Sequence[Point], config: Config, case: str, step_s: float) -> str:
     """The README's line on ``case``'s budget."""
     t = describe(config.timing)
     chain = (t["sensor_delay_s"] + t["planning_delay_s"] + t["command_delay_s"]) * 1e3
+    base = next(p for p in points if (p.case, p.path, p.compensate, p.added_s) == (case, "command", False, 0.0))
+    clearance = "n/a" if base.clearance_m is None else f"{base.clearance_m:.2f} m"
 
-    def clearance(path: str, compensate: bool) -> str:
-        p = next(p for p in points if (p.case, p.path, p.compensate, p.added_s) == (case, path, compensate, 0.0))
-        return "n/a" if p.clearance_m is None else f"{p.clearance_m:.2f} m"
+    def budget(path: str, compensate: bool) -> str:
+        b = _pick(found, case, path, compensate)
+        if b.budget_s is None:
+            return f"none (compensation alone makes it a {b.first_change})"
+        return f"{_ms(b)} ms" + (f" (then {b.first_change})" if b.first_change else "")
 
-    cmd, plan = _pick(found, case, "command", False), _pick(found, case, "planning", False)
-    cmd_c, plan_c = _pick(found, case, "command", True), _pick(found, case, "planning", True)
-    return (f"- Latency budget of the extreme case ({case}, combined planner) on top of the `{t['profile']}` "
-            f"timing ({chain:.0f} ms from sample to actuator, clearance {clearance('command', False)}): "
-            f"**{_ms(cmd)} ms** on the command path and **{_ms(plan)} ms** on the planning path "
-            f"({_ms(cmd_c)} and {_ms(plan_c)} ms with compensation).")
+    return (f"- Latency budget of the extreme case ({case}, combined planner, seed 0) on top of the `{t['profile']}` "
+            f"timing ({chain:.0f} ms from a sample to the actuators through a plan; {base.outcome}, clearance "
+            f"{clearance}), in steps of {step_s * 1e3:.0f} ms: **{budget('command', False)}** on the command path, "
+            f"**{budget('planning', False)}** on the planning path; with compensation {budget('command', True)} and "
+            f"{budget('planning', True)}.")
 
 
 def plot_budget(points: Sequence[Point], found: Sequence[Budget], path: str | Path) -> Path:

@@ -536,21 +536,29 @@ class SimulationParams:
         return round(1.0 / (self.plant_dt * self.motion_rate_hz))
 
 
+def _car(name: str) -> float:
+    """A delay of the ``car`` profile (:func:`moose.timing.car_chain`: config/kanon.dbc, read when first needed)."""
+    from .timing import car_chain  # the DBC's parser (cantools) only where a default is taken
+
+    return float(getattr(car_chain().timing, name))
+
+
 @dataclasses.dataclass(frozen=True)
 class TimingParams:
     """The car's latency chain (s): what the lockstep loop and the node graph delay, and whether the stack
     compensates it (:mod:`moose.timing`; docs/design.md, "Closed loop and rates").
 
     Each delay is a whole number of motion-control periods (checked by :class:`Config`).  The defaults are the
-    ``ideal`` profile (all zero); ``car`` (:func:`moose.timing.profile`) is the FPEV2-Kanon's chain, from the CAN
-    periods of config/kanon.dbc and the planning computer's solve time."""
+    ``car`` profile (:func:`moose.timing.profile`): the FPEV2-Kanon's chain, from the CAN periods of
+    config/kanon.dbc and the planning computer's solve time (docs/design.md: why ``car``); ``ideal`` is all
+    zero."""
 
-    sensor_delay_s: float = 0.0
+    sensor_delay_s: float = dataclasses.field(default_factory=lambda: _car("sensor_delay_s"))
     """d_s: a sample handed over by the sensors at t reaches the observer at t + d_s (stamped t)."""
-    planning_delay_s: float = 0.0
+    planning_delay_s: float = dataclasses.field(default_factory=lambda: _car("planning_delay_s"))
     """d_p: the plan of the instant t acts from t + d_p (the previous plan until then); also the simulated
     compute time the MPC's ``time_budget_s`` is checked against in lockstep."""
-    command_delay_s: float = 0.0
+    command_delay_s: float = dataclasses.field(default_factory=lambda: _car("command_delay_s"))
     """d_c: a command computed at t acts on the actuators from t + d_c (CAN frame period and phase included)."""
     compensate: bool = False
     """The planners and the FBL predict the state forward over the known latency before they plan or command."""
@@ -579,7 +587,7 @@ class Config:
     minimum_risk: MinimumRiskParams = MinimumRiskParams()
     simulation: SimulationParams = SimulationParams()
     verdict: VerdictParams = VerdictParams()
-    timing: TimingParams = TimingParams()
+    timing: TimingParams = dataclasses.field(default_factory=TimingParams)
 
     def __post_init__(self) -> None:
         motion_period = 1.0 / self.simulation.motion_rate_hz

@@ -86,7 +86,7 @@ def cmd_budget(args: argparse.Namespace) -> int:
         print(f"figure          {plot_budget(points, found, figure)}")
     rendered = {"budget": table}
     if EXTREME in cases:
-        rendered["budget-summary"] = render_summary(found, points, config, EXTREME)
+        rendered["budget-summary"] = render_summary(found, points, config, EXTREME, step)
     for path in writes:
         names = blocks_in(path, GENERATED)
         update_document(path, {name: rendered[name] for name in names})
