@@ -98,12 +98,14 @@ def record_result(result: Any, path: str | Path) -> dict[str, int]:
         add(t, REFERENCE.name, cv.reference_to_msg(factory, t, reference))
         u = np.array([trace["u_delta_rate"][k], trace["u_T_rl"][k], trace["u_T_rr"][k]])
         add(t, ACTUATOR_COMMAND.name, cv.actuator_to_msg(factory, t, reference, u))
+    # logged when the stack had them (moose.timing): a sample reaches the observer timing.sensor_delay_s after the
+    # sensors handed it over, an estimate is published at its tick; each keeps its own stamp in its header
     for sample in result.samples:
         topic, convert = cv.SENSOR_SAMPLES[type(sample)]
-        add(sample.t, topic.name, convert(factory, sample))
-    for estimate in result.estimates:
-        add(estimate.t, STATE.name, cv.estimate_to_msg(factory, estimate))
-        add(estimate.t, TF.name, cv.estimate_tf(factory, estimate))
+        add(sample.t + result.config.timing.sensor_delay_s, topic.name, convert(factory, sample))
+    for t, estimate in zip(trace["t"], result.estimates):
+        add(float(t), STATE.name, cv.estimate_to_msg(factory, estimate))
+        add(float(t), TF.name, cv.estimate_tf(factory, estimate))
     appeared = next((t for t, threat in result.threats if threat is not None), None)
     if appeared is not None:
         add(appeared, OBSTACLES.name, cv.obstacles_to_msg(factory, appeared, [result.scenario.danger_zone]))
