@@ -63,20 +63,25 @@ def test_aeb_cannot_stop_in_the_extreme_case(runs: dict) -> None:
 
 
 def test_max_steer_is_full_lock_while_the_threat_lasts_and_drives_y_max(runs: dict) -> None:
-    """δ* = δ_max toward the evasion side at every tick of the threat, the steering at full lock t_lock after the
-    detection (plus the EPS loop's lag), and the lateral displacement of eq. (ymax) at the speed at detection
-    (within 6 % after 1 s; the car slows at full lock, which y_max at constant speed does not)."""
+    """δ* = δ_max toward the evasion side at every tick of the threat from the detection's plan on (it acts the
+    planning delay after the detection: the lane keeping's δ* until then), the steering at full lock t_lock after
+    the detection (plus the EPS loop's lag), and the lateral displacement of eq. (ymax) from when the command reaches
+    the wheels (d_p + d_c after the detection; within 6 % after 1 s; the car slows at full lock, which y_max at
+    constant speed does not)."""
     result = runs["paper_v7_tau1.4", "max_steer"]
     trace, threat = result.trace, result.first_threat
     assert threat is not None and threat.side == 1
     delta_max = result.config.vehicle.delta_max
     under = trace["threat"] == 1.0
-    assert np.all(trace["delta_ref"][under] == delta_max)
+    acting = trace["t"] >= threat.t + result.config.timing.planning_delay_s - 1e-9
+    assert np.all(trace["delta_ref"][under & acting] == delta_max)
+    assert np.all(np.abs(trace["delta_ref"][under & ~acting]) < 0.1 * delta_max)
     table = MaxSteeringTable.build(result.config.model_vehicle, result.config.maneuver)
     t = trace["t"]
     assert float(np.interp(threat.t + table.t_lock + 0.15, t, trace["delta"])) > 0.97 * delta_max
-    v = float(np.interp(threat.t, t, trace["vx"]))
-    moved = float(np.interp(threat.t + 1.0, t, trace["y"]) - np.interp(threat.t, t, trace["y"]))
+    start = threat.t + result.config.timing.planning_delay_s + result.config.timing.command_delay_s  # wheels turn
+    v = float(np.interp(start, t, trace["vx"]))
+    moved = float(np.interp(start + 1.0, t, trace["y"]) - np.interp(start, t, trace["y"]))
     assert moved == pytest.approx(float(table.y_max(1.0, v)), rel=0.06)
 
 
