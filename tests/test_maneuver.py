@@ -241,3 +241,37 @@ def test_lateral_steering_index(table: MaxSteeringTable) -> None:
 def test_bad_parameters_name_the_field(field: str, value: float) -> None:
     with pytest.raises(ParamError, match=field):
         ManeuverParams(**{field: value})
+
+
+def test_a_cached_table_is_the_integrated_one_bit_for_bit(tmp_path, monkeypatch) -> None:
+    """The disk cache (``$MOOSE_CACHE_DIR/tables``) gives back exactly the integrated arrays; a corrupted file is
+    integrated again and replaced; another friction has another key."""
+    import moose.maneuver as maneuver
+
+    monkeypatch.setenv("MOOSE_CACHE_DIR", str(tmp_path))
+    vehicle, params = VehicleParams(mu=0.33), ManeuverParams(t_max=3.0)
+    path = maneuver.table_cache_path(vehicle, params)
+    assert path.parent == tmp_path / "tables" and path != maneuver.table_cache_path(VehicleParams(mu=0.8), params)
+    integrated = MaxSteeringTable._integrate(vehicle, params)
+
+    def fresh() -> MaxSteeringTable:
+        maneuver._build_table.cache_clear()
+        return MaxSteeringTable.build(vehicle, params)
+
+    def same(a: MaxSteeringTable, b: MaxSteeringTable) -> None:
+        for name in ("y", "vY", "aY", "reach"):
+            np.testing.assert_array_equal(a._grids[name], b._grids[name])
+        np.testing.assert_array_equal(a._grid_t, b._grid_t)
+        np.testing.assert_array_equal(a.v, b.v)
+        assert (a.mu, a.t_max, a.t_lock) == (b.mu, b.t_max, b.t_lock)
+
+    try:
+        same(fresh(), integrated)  # integrated and written
+        assert path.is_file()
+        same(fresh(), integrated)  # read back
+        path.write_bytes(path.read_bytes()[:100])
+        same(fresh(), integrated)  # truncated: integrated again
+        with np.load(path) as replaced:
+            np.testing.assert_array_equal(replaced["y"], integrated._grids["y"])
+    finally:
+        maneuver._build_table.cache_clear()

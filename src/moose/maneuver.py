@@ -19,8 +19,13 @@ The paper does not state the friction its y_max used: :data:`moose.paper.PAPER_F
 """
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import math
+import os
+import tempfile
 from functools import lru_cache
+from pathlib import Path
 from types import ModuleType
 from typing import Any, NamedTuple, Sequence, Union
 
@@ -210,7 +215,7 @@ class MaxSteeringTable:
 
     def __init__(self, t: np.ndarray, v: np.ndarray, y: np.ndarray, vY: np.ndarray, aY: np.ndarray,
                  mu: float, t_max: float | None = None, t_lock: float = 0.0) -> None:
-        grid_t = np.asarray(t, dtype=float)
+        grid_t = self._grid_t = np.asarray(t, dtype=float)
         self.t_max = float(grid_t[-1] if t_max is None else t_max)
         """Longest time answered (s); later times are clamped."""
         self.t = grid_t[grid_t <= self.t_max + 1e-9]
@@ -336,9 +341,47 @@ class MaxSteeringTable:
         return self._query("reach", t, vx, 0)
 
 
+TABLE_SOURCES = ("maneuver.py", "tire.py", "params.py", "schema.py")
+"""The modules whose code decides a table's numbers: their text is part of its cache key."""
+
+
+def table_cache_path(vehicle: VehicleParams, params: ManeuverParams) -> Path:
+    """Where the table of (``vehicle``, ``params``) is cached: ``$MOOSE_CACHE_DIR/tables/<key>.npz``, the key a
+    SHA-256 of every field of both, the text of :data:`TABLE_SOURCES` and the NumPy and CasADi versions (the
+    integration's arithmetic), so a changed input or code never finds another's table."""
+    from .ccompile import cache_dir
+
+    digest = hashlib.sha256(repr((dataclasses.astuple(vehicle), dataclasses.astuple(params), np.__version__,
+                                  ca.CasadiMeta.version())).encode())
+    here = Path(__file__).parent
+    for name in TABLE_SOURCES:
+        digest.update((here / name).read_bytes())
+    return cache_dir() / "tables" / f"{digest.hexdigest()[:32]}.npz"
+
+
 @lru_cache(maxsize=32)
 def _build_table(vehicle: VehicleParams, params: ManeuverParams) -> MaxSteeringTable:
-    return MaxSteeringTable._integrate(vehicle, params)
+    """The table, from the disk cache when it holds it (bit for bit the integrated arrays: a worker of a sweep, a
+    ``moose simulate`` run need not integrate eq. (ymax) again, 0.4 s each), else integrated and cached (written
+    to a temporary file and renamed, so a concurrent reader sees a whole file or none).  An unreadable cached file
+    (truncated, corrupted: the archive's checksums) is integrated again and replaced."""
+    path = table_cache_path(vehicle, params)
+    try:
+        with np.load(path) as cached:
+            return MaxSteeringTable(cached["t"], cached["v"], cached["y"], cached["vY"], cached["aY"],
+                                    float(cached["mu"]), float(cached["t_max"]), float(cached["t_lock"]))
+    except Exception:  # noqa: BLE001 - no usable cached table (none, unreadable, another format): integrate
+        pass
+    table = MaxSteeringTable._integrate(vehicle, params)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".npz.partial", delete=False) as handle:
+            np.savez(handle, t=table._grid_t, v=table.v, y=table._grids["y"], vY=table._grids["vY"],
+                     aY=table._grids["aY"], mu=table.mu, t_max=table.t_max, t_lock=table.t_lock)
+        os.replace(handle.name, path)
+    except OSError:
+        pass  # a read-only or full cache costs the next process the integration, nothing else
+    return table
 
 
 def lateral_steering_index(w: float, tau: float, vx: float, table: MaxSteeringTable) -> float:
