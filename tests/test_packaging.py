@@ -133,7 +133,7 @@ def test_moose_ros_registers_its_commands_and_the_recorder() -> None:
                         "bag": "moose_ros.cli.bag:add_subparser"}
     assert [ep.value for ep in entry_points(group="moose.recorders")] == ["moose_ros.bag.record:record_simulation"]
     choices = build_parser()._subparsers._group_actions[0].choices  # type: ignore[union-attr]
-    assert set(choices) == {"simulate", "reproduce", "sweep", "can", "node", "launch", "bag"}
+    assert set(choices) == {"simulate", "reproduce", "sweep", "budget", "benchmark", "can", "node", "launch", "bag"}
 
 
 def test_simulate_records_a_bag_by_default_through_the_plugin(tmp_path: Path, monkeypatch, capsys) -> None:

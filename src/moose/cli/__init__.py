@@ -2,10 +2,10 @@
 
 Built in: ``simulate`` (one moose test in lockstep, :mod:`.simulate`), ``reproduce`` (the
 paper's cases and claims, :mod:`.reproduce`), ``sweep`` (many moose tests and their maps,
-:mod:`.sweep`), ``budget`` (the latency budget of the paper's cases, :mod:`.budget`) and ``can``
-(vehicle-bus tools, :mod:`.can`).  Other packages add commands
-through entry points (:mod:`.plugins`); the node graph's ``node``, ``launch`` and ``bag``
-come with moose_ros.  Bad input ends with ``moose: error: …`` naming the field and the
+:mod:`.sweep`), ``budget`` (the latency budget of the paper's cases, :mod:`.budget`), ``benchmark``
+(every planner over the paper region, the leaderboard, :mod:`.benchmark`) and ``can`` (vehicle-bus tools,
+:mod:`.can`).  Other packages add commands through entry points (:mod:`.plugins`); the node graph's
+``node``, ``launch`` and ``bag`` come with moose_ros.  Bad input ends with ``moose: error: …`` naming the field and the
 value, and exit status 2; Ctrl-C with 130 (:mod:`moose.cli.common` lists every exit
 status).
 """
@@ -18,7 +18,7 @@ import sys
 from typing import Callable, Sequence
 
 from ..params import ParamError
-from . import budget, can, reproduce, simulate, sweep
+from . import benchmark, budget, can, reproduce, simulate, sweep
 from .common import DEFAULT_SCENARIO, EXIT_BAD_INPUT, EXIT_INTERRUPTED, INTERRUPTS
 from .plugins import add_plugin_commands
 
@@ -35,6 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
     reproduce.add_subparser(sub)
     sweep.add_subparser(sub)
     budget.add_subparser(sub)
+    benchmark.add_subparser(sub)
     add_plugin_commands(sub)
     return parser
 
