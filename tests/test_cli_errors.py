@@ -1,7 +1,9 @@
-"""Bad input gets ``moose: error:`` and exit status 2, never a traceback; outputs are checked before a run; the exit
-status of ``moose simulate`` is its verdict.  The probes of the review's section 1 (CLI input, scenario files,
-output paths, non-finite values), each as a regression test, run as a user would: the ``moose`` command in a
-child process.
+"""Bad input gets ``moose: error:`` and exit status 2, never a traceback, a hang or a memory blow-up; outputs are
+checked before a run, and one that fails after it (a full disk) is exit status 5 after the result; the exit status
+of ``moose simulate`` is its verdict.  The probes of the reviews (CLI input, scenario and parameter files, output
+paths, non-finite values, devices, services, full disks), each as a regression test.  Most run the command in this
+process (``moose.cli.main``, :func:`here`); those whose process boundary matters (signals, a closed pipe, the
+verdict as a user sees it) run the ``moose`` command as a child process (:func:`moose`).
 """
 from __future__ import annotations
 
@@ -10,6 +12,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -25,6 +28,20 @@ SHORT = ["--duration", "0.5", "--no-bag"]
 
 def moose(*args: str, cwd: Path | None = None, timeout: float = 300) -> subprocess.CompletedProcess:
     return subprocess.run(MOOSE + list(args), capture_output=True, text=True, timeout=timeout, cwd=cwd)
+
+
+def here(capsys: pytest.CaptureFixture[str], *args: str) -> subprocess.CompletedProcess:
+    """``moose ARGS`` run in this process (``moose.cli.main``), as :func:`moose` reports it: a second of imports
+    cheaper than a child process.  A command whose process boundary matters (signals, pipes) runs as a child."""
+    from moose.cli import main
+
+    capsys.readouterr()
+    try:
+        code = main(list(args))
+    except SystemExit as exc:  # argparse's own errors
+        code = int(exc.code or 0)
+    out, err = capsys.readouterr()
+    return subprocess.CompletedProcess(["moose", *args], code, out, err)
 
 
 def refused(out: subprocess.CompletedProcess, *needles: str) -> None:
@@ -44,34 +61,38 @@ def strict_json(path: Path) -> dict:
     return json.loads(path.read_text(), parse_constant=refuse)
 
 
-def test_a_negative_seed_is_refused() -> None:
-    refused(moose("simulate", "--seed", "-1", *SHORT), "--seed", "'-1' must be a non-negative integer")
+def test_a_negative_seed_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    refused(here(capsys, "simulate", "--seed", "-1", *SHORT), "--seed", "'-1' must be a non-negative integer")
 
 
 @pytest.mark.parametrize("field", ["name", "v_init", "v_des", "tau", "obstacle"])
-def test_a_scenario_file_missing_a_required_field_is_refused(tmp_path: Path, field: str) -> None:
+def test_a_scenario_file_missing_a_required_field_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                             field: str) -> None:
     text = (SCENARIO_DIR / "paper_v7_tau1.4.yaml").read_text()
     kept = [line for line in text.splitlines() if not line.startswith(f"{field}:")]
     assert len(kept) == len(text.splitlines()) - 1
     scenario = tmp_path / "partial.yaml"
     scenario.write_text("\n".join(kept) + "\n")
-    refused(moose("simulate", "--scenario", str(scenario), *SHORT), f"partial.{field} is missing: a required field")
+    refused(here(capsys, "simulate", "--scenario", str(scenario), *SHORT),
+            f"partial.{field} is missing: a required field")
 
 
 @pytest.mark.parametrize("value", ["inf", "-inf", "nan", "1e400"])
 @pytest.mark.parametrize("flag", ["--obstacle-half-width", "--tau", "--speed", "--duration", "--mu"])
-def test_non_finite_numbers_are_refused_at_the_command_line(flag: str, value: str) -> None:
+def test_non_finite_numbers_are_refused_at_the_command_line(capsys: pytest.CaptureFixture[str], flag: str,
+                                                           value: str) -> None:
     args = {"--speed": "7", "--tau": "1.4", "--obstacle-half-width": "1"}
     args[flag] = value
-    out = moose("simulate", *[f"{k}={v}" for k, v in args.items()], "--no-bag")
+    out = here(capsys, "simulate", *[f"{k}={v}" for k, v in args.items()], "--no-bag")
     refused(out, flag, f"'{value}' must be a finite positive number")
 
 
 @pytest.mark.parametrize("adhoc", [["--speed", "7", "--tau", "0.001", "--obstacle-half-width", "1"],
                                    ["--speed", "1e-6", "--tau", "1", "--obstacle-half-width", "1"]])
-def test_degenerate_tests_write_valid_json(tmp_path: Path, adhoc: list[str]) -> None:
+def test_degenerate_tests_write_valid_json(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                          adhoc: list[str]) -> None:
     """The review: ``--tau 0.001`` and ``--speed 1e-6`` wrote Infinity into the JSON."""
-    out = moose("simulate", *adhoc, "--no-bag", "--json", str(tmp_path / "s.json"))
+    out = here(capsys, "simulate", *adhoc, "--no-bag", "--json", str(tmp_path / "s.json"))
     summary = strict_json(tmp_path / "s.json")
     assert out.returncode == outcome_exit_status(summary["outcome"])
     assert summary["notes"]  # what is not a number says why
@@ -100,12 +121,13 @@ def bad_paths(tmp: Path) -> list[tuple[str, str, str]]:
 
 
 @pytest.mark.parametrize("case", range(11))
-def test_unusable_output_paths_are_refused_before_the_run(tmp_path: Path, case: int) -> None:
+def test_unusable_output_paths_are_refused_before_the_run(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                         case: int) -> None:
     """The review: every unwritable --json/--plot/--bag path was a traceback after the run, and the bag and the
     other outputs were lost with it."""
     flag, path, what = bad_paths(tmp_path)[case]
     args = ["simulate", "--duration", "0.5", flag, path] + (["--no-bag"] if flag != "--bag" else [])
-    refused(moose(*args), f"moose: error: {flag} {path!r}", what)
+    refused(here(capsys, *args), f"moose: error: {flag} {path!r}", what)
 
 
 @pytest.mark.graph
@@ -188,12 +210,58 @@ def test_a_closed_pipe_is_not_a_traceback() -> None:
 @pytest.mark.parametrize("section", ["/*", "observer", "/observer"])
 @pytest.mark.parametrize("command", [["simulate", *SHORT], ["reproduce"],
                                      ["sweep", "--speed", "5", "-o", "{tmp}/sweep"]])
-def test_a_parameter_file_section_that_the_command_would_ignore_is_refused(tmp_path: Path, section: str,
-                                                                          command: list[str]) -> None:
+def test_a_parameter_file_section_that_the_command_would_ignore_is_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], section: str, command: list[str]) -> None:
     """The probe ran ``moose simulate --config`` with a file whose only section is ``/*`` (or ``observer:``)
     holding ``vehicle: {m: -5}``: CLEAR, rc 0, the file ignored.  The core applies only ``/**``."""
     path = tmp_path / "sections.yaml"
     path.write_text(f'"{section}":\n  ros__parameters:\n    vehicle: {{m: -5.0}}\n')
     args = [a.format(tmp=tmp_path) for a in command[1:]]
-    refused(moose(command[0], "--config", str(path), *args), f"section {section!r} is not applied by "
+    refused(here(capsys, command[0], "--config", str(path), *args), f"section {section!r} is not applied by "
             f"moose {command[0]}, which reads only '/**'")
+
+
+# -- in-process: moose.cli.main, as the command runs it (a subprocess each costs a second of imports) -------------
+
+def _fifo_unblocker(path: Path, after: float) -> threading.Thread:
+    """Open the FIFO for writing after ``after`` s and close it: a reader blocked on it (main) gets end of file."""
+    def unblock() -> None:
+        time.sleep(after)
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK)  # ENXIO when no reader waits: nothing to unblock
+        except OSError:
+            return
+        os.close(fd)
+
+    thread = threading.Thread(target=unblock, daemon=True)
+    thread.start()
+    return thread
+
+
+@pytest.mark.parametrize("kind, words", [
+    ("non-UTF-8", "is not UTF-8 text: byte 0xff at offset 7"),
+    ("/dev/zero", "it is a character device, not a regular file"),
+    ("FIFO", "it is a FIFO, not a regular file"),
+    ("directory", "it is a directory, not a regular file"),
+    ("oversize", "is larger than 262144 bytes"),
+])
+def test_a_config_that_is_no_text_file_is_refused_before_it_is_read(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                                     kind: str, words: str) -> None:
+    """The probe: 0xff bytes gave a UnicodeDecodeError traceback, /dev/zero ate memory until SIGKILL, a FIFO hung."""
+    path = tmp_path / "config.yaml"
+    if kind == "non-UTF-8":
+        path.write_bytes(b"/**:\n  \xff\xfe\n")
+    elif kind == "/dev/zero":
+        path = Path("/dev/zero")
+    elif kind == "FIFO":
+        os.mkfifo(path)
+        _fifo_unblocker(path, 5.0)  # on main the read blocked until a writer came: this one, 5 s later
+    elif kind == "directory":
+        path = tmp_path
+    else:
+        path.write_text("/**:\n  ros__parameters:\n" + "    # padding\n" * 30_000)
+    start = time.monotonic()
+    result = here(capsys, "simulate", "--config", str(path), "--no-bag", "--duration", "0.5")
+    assert time.monotonic() - start < 4.0  # refused at once, not after reading
+    refused(result, f"parameter file {str(path)!r}", words)
+

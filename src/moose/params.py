@@ -301,11 +301,10 @@ def read_ros_params(path: str | Path, node: str | None = None, *, reader: str | 
     only the wildcard section (``moose simulate``): any other section of the file is then a
     :class:`ParamError` naming it, instead of being ignored.
     """
+    from .files import read_input
+
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ParamError(f"parameter file {str(path)!r} cannot be read: {exc.strerror}") from None
+    text = read_input(path, "parameter file")
     try:
         document = yaml.safe_load(text)
     except yaml.YAMLError as exc:

@@ -18,6 +18,7 @@ from typing import Any, Optional
 
 import yaml
 
+from .files import read_input
 from .paper import PAPER_FRICTION
 from .params import ParamError, build, check, non_negative, positive, replace
 from .resources import SCENARIO_DIR
@@ -142,8 +143,9 @@ def load_scenario(name_or_path: str | Path, directory: Path = SCENARIO_DIR) -> S
     if not path.is_file():
         known = ", ".join(available_scenarios(directory))
         raise ParamError(f"scenario = {str(name_or_path)!r} is unknown: no file {str(path)!r} (shipped: {known})")
+    text = read_input(path, "scenario file")
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+        data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
         raise ParamError(f"scenario file {str(path)!r} is not valid YAML: {exc}") from None
     return scenario_from_mapping(data, where=path.stem)

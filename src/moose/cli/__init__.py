@@ -5,9 +5,10 @@ paper's cases and claims, :mod:`.reproduce`), ``sweep`` (many moose tests and th
 :mod:`.sweep`), ``budget`` (the latency budget of the paper's cases, :mod:`.budget`), ``benchmark``
 (every planner over the paper region, the leaderboard, :mod:`.benchmark`) and ``can`` (vehicle-bus tools,
 :mod:`.can`).  Other packages add commands through entry points (:mod:`.plugins`); the node graph's
-``node``, ``launch`` and ``bag`` come with moose_ros.  Bad input ends with ``moose: error: …`` naming the field and the
-value, and exit status 2; Ctrl-C with 130 (:mod:`moose.cli.common` lists every exit
-status).
+``node``, ``launch`` and ``bag`` come with moose_ros.  Bad input ends with ``moose: error: …`` naming the field and
+the value, and exit status 2; an output that cannot be written once the work is done (a full disk) ends with
+``moose: error: …`` after the result, and exit status 5; Ctrl-C with 130 (:mod:`moose.cli.common` lists every
+exit status).
 """
 from __future__ import annotations
 
@@ -17,9 +18,10 @@ import signal
 import sys
 from typing import Callable, Sequence
 
+from ..files import OutputError
 from ..params import ParamError
 from . import benchmark, budget, can, reproduce, simulate, sweep
-from .common import DEFAULT_SCENARIO, EXIT_BAD_INPUT, EXIT_INTERRUPTED, INTERRUPTS
+from .common import DEFAULT_SCENARIO, EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_OUTPUT, INTERRUPTS
 from .plugins import add_plugin_commands
 
 __all__ = ["DEFAULT_SCENARIO", "build_parser", "main"]
@@ -65,6 +67,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ParamError as exc:
         print(f"moose: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except OutputError as exc:  # after the result was reported
+        print(f"moose: error: {exc}", file=sys.stderr)
+        return EXIT_OUTPUT
     except KeyboardInterrupt:
         return EXIT_INTERRUPTED
     except SystemError as exc:  # Ctrl-C inside a C extension (CasADi) surfaces as "returned a result with an

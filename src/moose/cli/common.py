@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 from pathlib import Path
-from typing import Any, Optional, Sequence
+from typing import Any, Callable, Optional, Sequence
 
 from ..params import ParamError
 from ..schema import PLANNER_MODES
@@ -36,6 +36,12 @@ EXIT_DEGRADED = 4
 """``moose launch``: the outcome was ``clear``, but the run was degraded — a node failed to start, died, stalled
 or was stopped by a fault, or the graph fell back (a planner replaced, a minimum-risk maneuver): the car came
 through, the system did not (:mod:`moose_ros.incidents`)."""
+
+EXIT_OUTPUT = 5
+"""The command did its work and reported the result (a run's verdict, the cases of a sweep), but an output
+could not be written after it (a full disk): ``moose: error: …`` names the output and what was kept.  It takes
+precedence over the outcome's status; the outcome is in what was printed."""
+
 
 class Interrupts:
     """Ctrl-C that cannot be lost.  Python raises KeyboardInterrupt wherever the main thread is; inside a C
@@ -153,6 +159,19 @@ def check_output_file(flag: str, path: Optional[str], suffixes: Optional[Sequenc
     except OSError as exc:
         raise ParamError(f"{flag} {path!r} cannot be written: {exc.strerror or exc}") from None
     return target
+
+
+def write_output(flag: str, path: Path, write: Callable[[Path], Any]) -> Optional[str]:
+    """Write the output file ``path`` of finished work through ``write(tmp)``, whole or not at all
+    (:func:`moose.files.replaced_atomically`); ``None`` when written, else why not (a full disk), naming ``flag``."""
+    from ..files import replaced_atomically
+
+    try:
+        with replaced_atomically(path) as tmp:
+            write(tmp)
+    except OSError as exc:
+        return f"{flag} {str(path)!r}: writing failed ({exc.strerror or exc}); nothing was written there"
+    return None
 
 
 def check_output_dir(flag: str, path: Optional[str | Path]) -> Optional[Path]:

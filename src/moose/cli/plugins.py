@@ -8,7 +8,8 @@
   (:class:`moose.simulation.SimulationResult`) into a new bag directory; ``moose simulate`` uses it
   (moose_ros provides ``bag``).
 
-Handlers and recorders report bad input by raising :class:`moose.params.ParamError`.
+Handlers and recorders report bad input by raising :class:`moose.params.ParamError`, and an output that cannot
+be written once the work is done (a recorder on a full disk) by raising :class:`moose.files.OutputError`.
 """
 from __future__ import annotations
 

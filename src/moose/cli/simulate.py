@@ -3,9 +3,10 @@
 Prints the summary (the verdict first) and optionally writes JSON and the figure.  The run is recorded as a
 ROS 2 bag by the recorder plugin (entry point group ``moose.recorders``, provided by moose_ros) unless
 ``--no-bag``; without a recorder installed the command says so and records nothing.  Every output path is
-checked before the run starts.  Exit status: 0 ``clear``, 1 a failure outcome (``collision``,
-``left_field``, ``lost_control``, ``stopped_short``), 3 ``incomplete``, 2 bad input, 130 Ctrl-C
-(:data:`moose.cli.common.OUTCOME_EXIT`).
+checked before the run starts; one that cannot be written after it (a full disk) is reported after the
+verdict, the others are still written.  Exit status: 0 ``clear``, 1 a failure outcome (``collision``,
+``left_field``, ``lost_control``, ``stopped_short``), 3 ``incomplete``, 2 bad input, 5 an output could not
+be written (the verdict is printed above the error), 130 Ctrl-C (:data:`moose.cli.common.OUTCOME_EXIT`).
 """
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import sys
 from pathlib import Path
 from typing import Any, Callable, Optional
 
+from ..files import OutputError
 from ..params import ParamError
 from .common import (
     INTERRUPTS,
@@ -27,6 +29,7 @@ from .common import (
     run_config,
     run_folder,
     scenario_from_args,
+    write_output,
 )
 from .plugins import recorder
 
@@ -107,6 +110,16 @@ def bag_recorder(args: argparse.Namespace) -> Optional[Callable[[Any, Path], Any
     return record
 
 
+def _write(failures: list[str], label: str, flag: str, path: Path, write: Callable[[Path], Any]) -> None:
+    """Write one output of the finished run (:func:`~moose.cli.common.write_output`) and say where it went, or
+    keep why it could not be written in ``failures``."""
+    failure = write_output(flag, path, write)
+    if failure is None:
+        print(f"{label:<16}{path}")
+    else:
+        failures.append(failure)
+
+
 def cmd_simulate(args: argparse.Namespace) -> int:
     from ..metrics import summarize
     from ..plots import plot_result
@@ -128,18 +141,24 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     INTERRUPTS.check()  # an interrupted run is not reported as one that ended
     summary = summarize(result, criticality=args.criticality)
     print(format_summary(summary))
+    failures: list[str] = []  # an output that fails now (a full disk) is reported after the verdict
     if commonroad_path is not None:
         from ..commonroad.scenario import write_run
 
-        print(f"commonroad      {write_run(result, commonroad_path)}")
+        _write(failures, "commonroad", "--commonroad-out", commonroad_path, lambda tmp: write_run(result, tmp))
     if json_path is not None:
-        json_path.write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n", encoding="utf-8")
-        print(f"summary         {json_path}")
+        text = json.dumps(summary, indent=2, allow_nan=False) + "\n"
+        _write(failures, "summary", "--json", json_path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
     if plot_path is not None:
-        print(f"figure          {plot_result([result], plot_path)}")
+        _write(failures, "figure", "--plot", plot_path, lambda tmp: plot_result([result], tmp))
     if record is not None:
         path = bag_path if bag_path is not None else run_folder(scenario.name, result.planner) / "bag"
-        record(result, path)
-        print(f"bag             {path}")
+        try:
+            record(result, path)
+            print(f"bag             {path}")
+        except OutputError as exc:
+            failures.append(str(exc))
+    if failures:
+        raise OutputError("; ".join(failures))
     return outcome_exit_status(summary["outcome"])
 

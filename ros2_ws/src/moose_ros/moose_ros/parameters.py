@@ -184,10 +184,13 @@ def check_parameter_file(path: str | Path, nodes: Collection[str] = tuple(NODES)
     checked."""
     import yaml
 
+    from moose.files import read_input
+
+    text = read_input(path, "parameter file")  # a FIFO, a device, bytes that are not text: an error here
     try:
-        document = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
-    except (OSError, yaml.YAMLError):
-        return  # moose.params.read_ros_params reports these with the path
+        document = yaml.safe_load(text)
+    except yaml.YAMLError:
+        return  # moose.params.read_ros_params reports it with the path
     if not isinstance(document, Mapping):
         return
     for section in document:

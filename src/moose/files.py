@@ -1,0 +1,81 @@
+"""Files of the commands: input files read the one way every command reads them, and outputs that fail.
+
+A path on the command line can name anything: a FIFO (reading it waits for a writer that never comes), a
+device (``/dev/zero`` never ends), a directory, a file of gigabytes or of bytes that are not text.
+:func:`read_input` reads only a regular file of at most :data:`MAX_INPUT_BYTES`, as UTF-8; anything else is a
+:class:`~moose.params.ParamError` naming the file, before a single byte of a special file is read.
+
+Output paths are checked before any work starts (:mod:`moose.cli.common`); what can still fail is writing
+after the work is done, on a full disk: :class:`OutputError`.  The command then reports its result first and
+the failed output after it, with an exit status of its own (:data:`moose.cli.common.EXIT_OUTPUT`).
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import stat
+from pathlib import Path
+from typing import Iterator
+
+from .params import ParamError
+
+MAX_INPUT_BYTES = 256 * 1024
+"""The largest input file read (256 KiB).  The shipped parameter file is 3 kB and a scenario 0.5 kB, so this is
+about 80 times the largest hand-written input; PyYAML's parser takes about 3 s per MiB here, and a larger file is
+refused before it is parsed or held in memory."""
+
+
+class OutputError(RuntimeError):
+    """An output could not be written after the work was done (a full disk, an I/O error); the message names the
+    output, the reason and what was kept."""
+
+
+_KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
+          (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+
+
+def read_input(path: str | Path, what: str) -> str:
+    """The text of the input file ``path`` (``what`` names it in errors: "parameter file", "scenario file").
+
+    The file is opened without blocking (a FIFO does not wait for a writer), checked to be a regular file
+    through the descriptor that was opened, and read up to :data:`MAX_INPUT_BYTES`; its bytes must be UTF-8.
+    """
+    where = f"{what} {str(path)!r}"
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+    except OSError as exc:
+        raise ParamError(f"{where} cannot be read: {exc.strerror or exc}") from None
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            kind = next((name for test, name in _KINDS if test(mode)), "a special file")
+            raise ParamError(f"{where} cannot be read: it is {kind}, not a regular file")
+        data = os.read(fd, MAX_INPUT_BYTES + 1)
+        while len(data) <= MAX_INPUT_BYTES and (more := os.read(fd, MAX_INPUT_BYTES + 1 - len(data))):
+            data += more
+    except OSError as exc:
+        raise ParamError(f"{where} cannot be read: {exc.strerror or exc}") from None
+    finally:
+        os.close(fd)
+    if len(data) > MAX_INPUT_BYTES:
+        raise ParamError(f"{where} is larger than {MAX_INPUT_BYTES} bytes (moose.files.MAX_INPUT_BYTES): "
+                         "not an input file")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ParamError(f"{where} is not UTF-8 text: byte 0x{data[exc.start]:02x} at offset {exc.start}") from None
+
+
+@contextlib.contextmanager
+def replaced_atomically(path: Path) -> Iterator[Path]:
+    """A temporary file next to ``path`` (same suffix, so writers that go by it choose the same format) that
+    replaces ``path`` once the block has written it; if writing fails the temporary file is removed and
+    ``path`` is left as it was, never half written."""
+    tmp = path.with_name(f".{path.stem}.partial{path.suffix}")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
