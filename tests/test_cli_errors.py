@@ -15,6 +15,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import Callable, Iterator
 
 import pytest
 
@@ -222,6 +223,48 @@ def test_a_parameter_file_section_that_the_command_would_ignore_is_refused(
 
 
 # -- in-process: moose.cli.main, as the command runs it (a subprocess each costs a second of imports) -------------
+
+@pytest.fixture
+def tiny_disk(tmp_path: Path) -> Iterator[Callable[[int], Path]]:
+    """A tmpfs of a few KiB (mount needs root: skipped without it), unmounted at the end whatever happened."""
+    mounted: list[Path] = []
+
+    def mount(kib: int) -> Path:
+        point = tmp_path / f"disk{len(mounted)}"
+        point.mkdir()
+        done = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={kib}k,mode=0700", "tmpfs", str(point)],
+                              capture_output=True, text=True, timeout=30)
+        if done.returncode != 0:
+            pytest.skip(f"a tmpfs of {kib} KiB cannot be mounted here: {done.stderr.strip()}")
+        mounted.append(point)
+        return point
+
+    yield mount
+    for point in mounted:
+        if subprocess.run(["umount", str(point)], capture_output=True, timeout=30).returncode != 0:
+            subprocess.run(["umount", "-l", str(point)], capture_output=True, timeout=30)
+
+
+def test_a_full_disk_under_the_bag_reports_the_verdict_then_the_output_error(
+        tmp_path: Path, tiny_disk: Callable[[int], Path], capsys: pytest.CaptureFixture[str]) -> None:
+    """The probe: ``simulate --bag`` on a full tmpfs printed CLEAR and exited 2 ("bad input, nothing was run").
+    Now the verdict comes first, then ``moose: error:`` for the bag, exit status 5; the JSON (elsewhere) is
+    written, and the bag holds what its last checkpoint wrote."""
+    from moose.cli.common import EXIT_OUTPUT
+    from moose_ros.bag import ReadReport, read_bag
+
+    bag = tiny_disk(64) / "bag"
+    done = here(capsys, "simulate", "--speed", "5", "--tau", "3", "--obstacle-half-width", "1", "--duration", "1",
+                "--bag", str(bag), "--json", str(tmp_path / "s.json"))
+    code, out, err = done.returncode, done.stdout, done.stderr
+    summary = strict_json(tmp_path / "s.json")
+    assert code == EXIT_OUTPUT == 5 and f"outcome         {summary['outcome'].upper()}" in out
+    assert err.startswith(f"moose: error: bag {str(bag)!r}: writing failed (No space left on device)")
+    assert "Traceback" not in err and "bag             " not in out
+    report = ReadReport(str(bag))
+    held = len(list(read_bag(bag, report=report)))
+    assert f"the bag holds {held} messages" in err and held > 0 and report.unfinished and not report.lost_bytes
+
 
 def _fifo_unblocker(path: Path, after: float) -> threading.Thread:
     """Open the FIFO for writing after ``after`` s and close it: a reader blocked on it (main) gets end of file."""

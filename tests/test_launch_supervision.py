@@ -78,17 +78,37 @@ def _alive(pid: int) -> bool:
     return stat[stat.rindex(")") + 2] != "Z"
 
 
-def test_sigkill_of_the_launcher_leaves_no_node_running(launcher: list[Launcher]) -> None:
-    """Review: SIGKILL of the launcher left all seven nodes running, six for good."""
-    run = Launcher(["--scenario", "paper_v5_tau3", "--no-bag", "--rate", "0.5"])
+def test_sigkill_of_the_launcher_leaves_no_node_running_and_a_bag_every_reader_opens(launcher: list[Launcher],
+                                                                                  tmp_path: Path) -> None:
+    """Review: SIGKILL of the launcher left all seven nodes running, six for good.  And the bag of the killed run
+    was readable only by our own reader: mcap's raised RecordLengthLimitExceeded, rosbags wanted metadata.yaml.
+    Now it ends at its last checkpoint, a valid bag for mcap (with Foxglove's decoder) and rosbags alike."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    from rosbags.rosbag2 import Reader
+
+    from moose_ros.bag import ReadReport, read_bag
+
+    bag = tmp_path / "bag"
+    run = Launcher(["--scenario", "paper_v5_tau3", "--bag", str(bag), "--rate", "0.5"])
     launcher.append(run)
     run.wait_started(NODES_FULL)
     nodes = descendants(run.proc.pid)
     assert len(nodes) >= NODES_FULL, nodes
+    time.sleep(3.0)  # the run is under way, and recorded
     run.proc.kill()
     run.proc.wait()
     time.sleep(5.0)
     assert [pid for pid in nodes if _alive(pid)] == []
+    with open(next(bag.glob("*.mcap")), "rb") as stream:
+        by_mcap = [m.channel.topic for m in make_reader(stream, decoder_factories=[DecoderFactory()])
+                   .iter_decoded_messages() if m.decoded_message is not None]
+    with Reader(bag) as reader:
+        by_rosbags = [c.topic for c, _t, _raw in reader.messages()]
+    report = ReadReport(str(bag))
+    ours = [m.topic for m in read_bag(bag, report=report)]
+    assert sorted(by_mcap) == sorted(by_rosbags) == sorted(ours) and "/diagnostics" in ours
+    assert report.unfinished and report.missing == {} and report.lost_bytes == 0
 
 
 def test_a_domain_with_nodes_of_another_graph_is_refused() -> None:

@@ -31,7 +31,7 @@ setup(
     python_requires=">=3.10",
     # the core (distribution "moose-avoidance", this repository's root: not on PyPI, install it with this one),
     # the DDS backend, the bag formats, the CAN bus (can_bridge), the replan figure and the Foxglove live view
-    install_requires=["moose-avoidance", "cyclonedds>=0.10.5", "rosbags>=0.10", "mcap>=1.1", "numpy>=1.24",
+    install_requires=["moose-avoidance", "cyclonedds>=0.10.5", "rosbags>=0.10", "mcap>=1.5", "numpy>=1.24",
                       "pyyaml>=6.0", "python-can>=4.3", "matplotlib>=3.7", "foxglove-sdk>=0.14"],
     extras_require={"parquet": ["pyarrow>=12"]},  # moose bag export --format parquet
     package_data={PACKAGE: ["msg/*.msg", "runtime/*.xml"]},  # the .msg files; the Fast DDS profile

@@ -389,6 +389,7 @@ def launch(
             signal.signal(sig, handler)
     summary = _summary(monitor, planner, seed, rate, exits, ends, faults, cut_short, interrupted)
     summary["runtime"] = runtimes
+    summary["bag_error"] = recorder.error if recorder is not None else None  # the recording, not the run
     return summary
 
 

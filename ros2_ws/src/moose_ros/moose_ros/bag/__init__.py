@@ -4,9 +4,10 @@ Bags are ROS 2 bag directories (``metadata.yaml`` + ``.mcap``), CDR messages wit
 embedded, so ``ros2 bag info/play``, rosbags and Foxglove open them.  Only public APIs of ``mcap`` and
 ``rosbags`` are used.
 
-Modules: :mod:`.writer` (:class:`BagWriter`: crash-safe writing), :mod:`.reader` (:class:`BagReader`,
-:func:`read_bag`: recovery of unfinished files, types from the bag's own definitions, a :class:`ReadReport` of
-everything that could not be read; :func:`bag_info`), :mod:`.record` (:class:`Recorder` of a running graph,
+Modules: :mod:`.writer` (:class:`BagWriter`: chunks with checksums, a valid bag at every checkpoint),
+:mod:`.reader` (:class:`BagReader`, :func:`read_bag`: damaged chunks skipped, unfinished and cut files read to
+their end, types from the bag's own definitions, a :class:`ReadReport` of everything that could not be read;
+:func:`bag_info`), :mod:`.record` (:class:`Recorder` of a running graph,
 :func:`record_result` of a lockstep run, :func:`record_simulation`: the recorder plugin of ``moose
 simulate``), :mod:`.params` (the run's parameters kept in the bag), :mod:`.play`, :mod:`.export` (CSV,
 Parquet), :mod:`.replan` (open-loop re-planning and its figure), :mod:`.view` (bird's-eye view).

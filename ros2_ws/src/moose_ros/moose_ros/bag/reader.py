@@ -7,15 +7,17 @@ deliver and why:
   or ``ros2idl``, as rosbags' AnyReader does), and so is a known type that the bag recorded with another
   definition (its RIHS01 hash differs).  A message that still cannot be decoded (no definition, corrupt
   CDR) is skipped, counted per topic and reported; reading goes on.
-- **Truncated or corrupt files**: a bag with ``metadata.yaml`` is read with rosbags' public
-  :class:`rosbags.rosbag2.Reader`; the messages it could not deliver are those ``metadata.yaml`` counts
-  and the files no longer hold (reported per topic, with the unreadable bytes).  A bag without it (a
-  recorder killed before closing the bag), whose metadata or index is unreadable, or whose index fails
-  before the first message, is streamed record by record with the ``mcap`` library's public
-  :class:`~mcap.stream_reader.StreamReader`: every complete record is kept; chunks are parsed strictly
-  here (each record read to its exact length) and their checksums checked; the complete records at the
-  start of a cut or corrupt chunk are kept; a corrupt record is skipped and reading resumes after it.
-  Unreadable bytes and chunks whose checksum fails are reported.
+- **Damaged, truncated or unfinished files**: a bag with ``metadata.yaml`` is read with rosbags' public
+  :class:`rosbags.rosbag2.Reader` while that works; the messages it could not deliver are those
+  ``metadata.yaml`` counts and the files no longer hold (reported per topic, with the unreadable bytes).  A
+  bag without it, whose metadata or index is unreadable, or where rosbags' reading fails (a chunk whose
+  checksum fails, no footer) is scanned record by record from where rosbags stopped (:class:`_Scan`): records
+  are parsed strictly (each read to its exact length); a chunk whose CRC-32 fails is skipped whole (its data
+  are corrupt) and reported with the messages its indexes count; after a record that does not parse, reading
+  resumes at the next offset where records verify again (a chunk whose checksum holds, or three well-formed
+  records in a row); the complete records at the start of a cut chunk are kept.  Unreadable bytes, skipped
+  chunks and files that were not closed (a footer without summary: the recorder was killed, or its disk
+  filled) or have no footer (cut short) are reported.
 - **A topic filter naming a topic the bag does not have** is a :class:`BagError` listing the bag's topics
   (rosbags reads *every* topic when given an empty selection).
 """
@@ -23,6 +25,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import re
+import struct
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,6 +35,7 @@ from typing import Any, Callable, Iterator, Mapping, Optional, Sequence, Union
 
 from ..interfaces import typestore
 from .errors import BagError
+from .writer import CHUNK_SPAN_S, MAGIC
 
 
 @dataclass(frozen=True)
@@ -60,8 +66,12 @@ class ReadReport:
     """Types decoded with the definitions embedded in the bag."""
     recovered: str = ""
     """Why the bag was read record by record instead of through its index (``""``: it was not)."""
-    suspect: list[str] = dataclasses.field(default_factory=list)
-    """Chunks whose checksum does not match: their messages were read, but may carry corrupt data."""
+    damaged: list[str] = dataclasses.field(default_factory=list)
+    """Chunks skipped because their checksum fails (their data are corrupt), each with the messages it held."""
+    unfinished: list[str] = dataclasses.field(default_factory=list)
+    """Files whose recording was not closed, each with how it ends."""
+    stopped: str = ""
+    """Why reading ended before the end of the bag (``""``: it did not)."""
 
     def skip(self, topic: str, type_name: str, reason: str) -> None:
         entry = self.skipped.setdefault(topic, {"type": type_name, "count": 0, "reason": reason})
@@ -69,8 +79,8 @@ class ReadReport:
 
     @property
     def complete(self) -> bool:
-        """Whether every message of the bag was delivered."""
-        return not (self.skipped or self.missing or self.lost_bytes or self.suspect)
+        """Whether every message of the bag was delivered, from a recording that was closed."""
+        return not (self.skipped or self.missing or self.lost_bytes or self.damaged or self.unfinished or self.stopped)
 
     def losses(self) -> list[str]:
         """One line per loss (empty when :attr:`complete`)."""
@@ -83,8 +93,7 @@ class ReadReport:
         if self.lost_bytes:
             lines.append(f"bag {self.path!r}: {self.lost_bytes} byte(s) of records are unreadable (a truncated or "
                          "corrupt file); their messages are lost")
-        lines += [f"bag {self.path!r}: the {where} fails its checksum; its messages were read but may be corrupt"
-                  for where in self.suspect]
+        lines += [f"bag {self.path!r}: {line}" for line in self.damaged + self.unfinished + [self.stopped] if line]
         return lines
 
 
@@ -147,33 +156,6 @@ def decode(decoder: Decoder, raw: bytes) -> tuple[Any, str]:
         return None, f"undecodable CDR ({type(exc).__name__}: {exc})"
 
 
-class _Counting:
-    """A binary stream that counts what was read from it."""
-
-    def __init__(self, stream: Any) -> None:
-        self.stream, self.count = stream, 0
-
-    def read(self, size: int = -1) -> bytes:
-        data = self.stream.read(size)
-        self.count += len(data)
-        return data
-
-
-@dataclass
-class _Stream:
-    """The complete records of one MCAP file, read in order."""
-
-    schemas: dict[int, tuple[str, str, str]]
-    """id → (name, encoding, definition)."""
-    channels: dict[int, tuple[str, int]]
-    """id → (topic, schema id)."""
-    messages: list[tuple[int, int, bytes]]
-    """(channel id, log time, CDR)."""
-    lost_bytes: int
-    suspect: list[int]
-    """File offsets of chunks whose checksum does not match their records."""
-
-
 def _records(data: bytes) -> tuple[list[Any], int]:
     """The schema, channel and message records at the start of a chunk's (uncompressed) records, parsed strictly:
     a record must fit in ``data`` and be read to its exact length.  A complete record that does not parse is
@@ -222,19 +204,6 @@ def _decompress(compression: str, data: bytes, size: Optional[int] = None) -> Op
     return data if not compression else None
 
 
-def _chunk(chunk: Any) -> tuple[list[Any], int, bool]:
-    """The records of a complete chunk record, the bytes of its records that could not be read, and whether its
-    checksum holds (a mismatch: the records read may carry corrupt data)."""
-    import zlib
-
-    data = _decompress(chunk.compression, chunk.data)
-    if data is None:
-        return [], chunk.uncompressed_size or len(chunk.data), False
-    records, good = _records(data)
-    intact = chunk.uncompressed_crc == 0 or zlib.crc32(data) == chunk.uncompressed_crc
-    return records, len(data) - good, intact
-
-
 def _partial_chunk(tail: bytes) -> tuple[list[Any], int]:
     """The complete records at the start of a truncated chunk (``tail``: the file from the chunk's first byte;
     uncompressed, zstd or lz4), and how many bytes of ``tail`` they span (0 for a compressed chunk: the
@@ -256,17 +225,135 @@ def _partial_chunk(tail: bytes) -> tuple[list[Any], int]:
     return records, (start + good if good and not compression else 0)
 
 
-def _stream(file: Path) -> _Stream:
-    """Every complete record of ``file``: no summary, index or footer needed.  Chunks are parsed strictly (a record
-    must be read to its exact length) and their checksums checked.  A record cut short (the end of a killed or
-    truncated file) gives up the complete records at its start (of a chunk); a corrupt record whose length still
-    fits in the file gives up what it can, is skipped, and reading resumes after it."""
-    from mcap.records import Channel, Chunk, Message, Schema
-    from mcap.stream_reader import StreamReader
+@dataclass
+class _Stream:
+    """The complete records of one MCAP file, read in order."""
 
-    found = _Stream({}, {}, [], 0, [])
+    schemas: dict[int, tuple[str, str, str]]
+    """id → (name, encoding, definition)."""
+    channels: dict[int, tuple[str, int]]
+    """id → (topic, schema id)."""
+    messages: list[tuple[int, int, bytes]]
+    """(channel id, log time, CDR)."""
+    lost_bytes: int = 0
+    damaged: list[tuple[int, dict[int, int]]] = dataclasses.field(default_factory=list)
+    """Chunks skipped because their checksum fails: (file offset, messages per channel id its indexes count)."""
+    ending: str = ""
+    """How the file ends: "closed" (a footer and a summary), "checkpoint" (a footer without summary: the writer
+    stopped before closing it), "cut" (no footer: truncated, or killed in the middle of a write)."""
 
-    def keep(record: Any) -> None:
+
+_CHUNK_HEAD = struct.Struct("<QQQI")
+"""A chunk record's start and end time, uncompressed size and CRC-32 (then its compression and records)."""
+_HEADER_AT = re.compile(rb"[\x01-\x0f].{4}\x00\x00\x00\x00", re.S)
+"""Where a record may start: a known opcode and a length below 4 GiB (resynchronisation after damage)."""
+
+
+class _Scan:
+    """One MCAP file read record by record, with no summary, index or footer needed (module doc)."""
+
+    def __init__(self, data: Any, file: Path) -> None:
+        self.data, self.size, self.file = data, len(data), file
+        self.found = _Stream({}, {}, [])
+        self._skipped: Optional[dict[int, int]] = None  # message counts of the chunk skipped last
+
+    def run(self) -> _Stream:
+        from mcap.opcode import Opcode
+
+        if self.data[:8] != MAGIC:
+            raise BagError(f"bag file {str(self.file)!r} is not a readable MCAP file ({self.size} bytes, "
+                           "no MCAP magic)")
+        position = 8
+        while position < self.size:
+            end = self._parse(position, keep=True)
+            if end is None:  # damaged here: on at the next record that verifies
+                following = self._resync(position + 1)
+                if following is None:
+                    self._cut(position)
+                    break
+                self.found.lost_bytes += following - position
+                end = following
+            elif self.data[position] == Opcode.FOOTER:
+                (summary,) = struct.unpack_from("<Q", self.data, position + 9)
+                self.found.ending = "closed" if summary else "checkpoint"
+                break
+            position = end
+        else:
+            self.found.ending = "cut"
+        if not self.found.channels and not self.found.messages:
+            raise BagError(f"bag file {str(self.file)!r} is truncated before its first complete chunk or channel: "
+                           f"{self.found.lost_bytes} of {self.size} bytes unreadable, no message can be recovered")
+        return self.found
+
+    def _head(self, position: int) -> Optional[tuple[int, int]]:
+        """(opcode, end) of the record at ``position``, if its header and body fit in the file."""
+        if position + 9 > self.size:
+            return None
+        end = position + 9 + struct.unpack_from("<Q", self.data, position + 1)[0]
+        return (self.data[position], end) if end <= self.size else None
+
+    def _parse(self, position: int, keep: bool) -> Optional[int]:
+        """The end of the record at ``position`` if it is one (a chunk: its checksum holds, or it is skipped as
+        damaged); ``keep``: take what it holds."""
+        from mcap.opcode import Opcode
+
+        head = self._head(position)
+        if head is None or not 0x01 <= head[0] <= 0x0F:
+            return None
+        opcode, end = head
+        body = self.data[position + 9:end]
+        if opcode == Opcode.CHUNK:
+            return end if self._chunk(position, body, keep) else None
+        if opcode in (Opcode.SCHEMA, Opcode.CHANNEL, Opcode.MESSAGE):
+            records, span = _records(self.data[position:end])
+            if span != end - position or not records:
+                return None
+            if keep:
+                self._keep(records[0])
+                self._skipped = None
+        elif opcode == Opcode.MESSAGE_INDEX and keep and self._skipped is not None and len(body) >= 6:
+            channel, size = struct.unpack_from("<HI", body)
+            self._skipped[channel] = self._skipped.get(channel, 0) + size // 16
+        elif opcode == Opcode.FOOTER and (len(body) != 20 or self.data[end:end + 8] != MAGIC):
+            return None
+        return end
+
+    def _chunk(self, position: int, body: bytes, keep: bool) -> bool:
+        """Whether the chunk record ``body`` is well formed; a damaged one (its checksum fails, its data do not
+        decompress) is counted and skipped, an intact one's records are kept."""
+        import zlib
+
+        try:
+            _start, _end, size, crc = _CHUNK_HEAD.unpack_from(body)
+            (name_length,) = struct.unpack_from("<I", body, _CHUNK_HEAD.size)
+            offset = _CHUNK_HEAD.size + 4 + name_length
+            compression = body[_CHUNK_HEAD.size + 4:offset].decode("utf-8")
+            (length,) = struct.unpack_from("<Q", body, offset)
+        except (struct.error, UnicodeDecodeError):
+            return False
+        if offset + 8 + length != len(body):
+            return False
+        data = _decompress(compression, body[offset + 8:], size)
+        intact = data is not None and len(data) == size and (crc == 0 or zlib.crc32(data) == crc)
+        if not keep:
+            return intact
+        if not intact:
+            self.found.lost_bytes += 9 + len(body)
+            self._skipped = {}
+            self.found.damaged.append((position, self._skipped))
+            return True
+        assert data is not None
+        records, span = _records(data)
+        for record in records:
+            self._keep(record)
+        self.found.lost_bytes += len(data) - span
+        self._skipped = None
+        return True
+
+    def _keep(self, record: Any) -> None:
+        from mcap.records import Channel, Message, Schema
+
+        found = self.found
         if isinstance(record, Schema):
             found.schemas[record.id] = (record.name, record.encoding, bytes(record.data).decode("utf-8", "replace"))
         elif isinstance(record, Channel):
@@ -274,49 +361,55 @@ def _stream(file: Path) -> _Stream:
         elif isinstance(record, Message):
             found.messages.append((record.channel_id, record.log_time, bytes(record.data)))
 
-    size = file.stat().st_size
+    def _resync(self, start: int) -> Optional[int]:
+        """The first offset from ``start`` where records verify again: a chunk whose checksum holds, or three
+        well-formed records in a row (a file without chunks has no checksum), or one that ends the file."""
+        for match in _HEADER_AT.finditer(self.data, start):
+            if self._verifies(match.start(), 3):
+                return match.start()
+        return None
+
+    def _verifies(self, position: int, depth: int) -> bool:
+        from mcap.opcode import Opcode
+
+        if self.data[position] == Opcode.CHUNK:
+            head = self._head(position)
+            return head is not None and self._chunk(position, self.data[position + 9:head[1]], keep=False)
+        end = self._parse(position, keep=False)
+        last = end is not None and (end == self.size or self.data[position] == Opcode.FOOTER)
+        return end is not None and (depth == 1 or last or self._verifies(end, depth - 1))
+
+    def _cut(self, position: int) -> None:
+        """The file ends inside the record at ``position``: keep the complete records at the start of a cut chunk."""
+        records, span = _partial_chunk(bytes(self.data[position:]))
+        for record in records:
+            self._keep(record)
+        self.found.lost_bytes += self.size - position - span
+        self.found.ending = "cut"
+
+
+def _stream(file: Path) -> _Stream:
+    """Every record of ``file`` that can be read (:class:`_Scan`)."""
+    import mmap
+
     with open(file, "rb") as handle:
-        position, resumed = 0, False
-        while True:
-            handle.seek(position)
-            counting = _Counting(handle)
-            end = position
-            try:
-                # mcap annotates its input as a file object, but only calls read(), which _Counting has
-                mcap_reader = StreamReader(counting, skip_magic=resumed, emit_chunks=True)  # type: ignore[arg-type]
-                for record in mcap_reader.records:
-                    if isinstance(record, Chunk):
-                        records, unread, intact = _chunk(record)
-                        for inner in records:
-                            keep(inner)
-                        found.lost_bytes += unread
-                        if not intact:
-                            found.suspect.append(end)
-                    else:
-                        keep(record)
-                    end = position + counting.count  # a record (a whole chunk) was read to its end
-                break  # up to the footer: the file is complete
-            except Exception:  # noqa: BLE001 - a cut or corrupt file raises many kinds (mcap's, zstd's, struct's)
-                pass
-            if end == 0:
-                raise BagError(f"bag file {str(file)!r} is not a readable MCAP file ({size} bytes, no complete record)")
-            handle.seek(end)
-            head = handle.read(9)  # opcode and length of the record that failed
-            length = int.from_bytes(head[1:9], "little") if len(head) == 9 else size
-            whole = end + 9 + length <= size
-            handle.seek(end)
-            records, span = _partial_chunk(handle.read(9 + length if whole else size - end))
-            for record in records:
-                keep(record)
-            if not whole:  # cut short: the end of the file (an unfinished file ends right after a record: 0 lost)
-                found.lost_bytes += size - end - span
-                break
-            found.lost_bytes += 9 + length - span
-            position, resumed = end + 9 + length, True
-    if not found.channels and not found.messages:
-        raise BagError(f"bag file {str(file)!r} is truncated before its first complete chunk or channel: "
-                       f"{found.lost_bytes} of {size} bytes unreadable, no message can be recovered")
-    return found
+        if os.fstat(handle.fileno()).st_size == 0:
+            raise BagError(f"bag file {str(file)!r} is not a readable MCAP file (0 bytes, no complete record)")
+        with mmap.mmap(handle.fileno(), 0, access=mmap.ACCESS_READ) as data:
+            return _Scan(data, file).run()
+
+
+def _ending(file: Path) -> str:
+    """How ``file`` ends (:attr:`_Stream.ending`), from its last 37 bytes."""
+    try:
+        with open(file, "rb") as handle:
+            handle.seek(max(os.fstat(handle.fileno()).st_size - 37, 0))
+            tail = handle.read(37)
+    except OSError:
+        return "cut"
+    if len(tail) != 37 or tail[-8:] != MAGIC or tail[:9] != b"\x02\x14" + bytes(7):
+        return "cut"
+    return "closed" if struct.unpack_from("<Q", tail, 9)[0] else "checkpoint"
 
 
 def _listed_counts(path: Path) -> dict[str, int]:
@@ -331,7 +424,7 @@ def _listed_counts(path: Path) -> dict[str, int]:
 
 
 class _IndexFailed(Exception):
-    """rosbags' indexed reading failed before it delivered a message: the files are streamed instead."""
+    """rosbags' indexed reading failed (a damaged chunk, a broken index): the files are streamed instead."""
 
 
 class BagReader:
@@ -364,6 +457,7 @@ class BagReader:
             for c in self._indexed.connections:
                 self.topics[c.topic] = c.msgtype
                 self.counts[c.topic] = (self.counts.get(c.topic) or 0) + c.msgcount
+            self._unfinished({f: _ending(f) for f in self._files()})
             return
         if not self._files():
             raise BagError(f"bag {str(self.path)!r} has neither metadata.yaml nor an .mcap file")
@@ -374,12 +468,37 @@ class BagReader:
         return sorted(self.path.glob("*.mcap")) if self.path.is_dir() else [self.path]
 
     def _load_streams(self) -> None:
-        self._streams = [_stream(f) for f in self._files()]
+        files = self._files()
+        self._streams = [_stream(f) for f in files]
         for s in self._streams:
             for topic, schema in s.channels.values():
                 self.topics.setdefault(topic, s.schemas.get(schema, ("", "", ""))[0])
         listed = _listed_counts(self.path)
         self.counts = {t: listed.get(t) for t in set(self.topics) | set(listed)}
+        self._unfinished({f: s.ending for f, s in zip(files, self._streams)})
+        self._damage(files, self._streams)
+
+    def _unfinished(self, endings: Mapping[Path, str]) -> None:
+        """Say which files were not closed (:attr:`ReadReport.unfinished`)."""
+        self.report.unfinished = [
+            f"file {f.name} was not closed (its recorder stopped without closing it: killed, or its disk full): it "
+            f"ends at its last checkpoint, what was recorded after that is not in it (a kill takes at most the last "
+            f"{CHUNK_SPAN_S:g} s)"
+            if ending == "checkpoint" else
+            f"file {f.name} ends without a footer: it was cut short (truncated, or its writer killed in a write)"
+            for f, ending in endings.items() if ending != "closed"]
+
+    def _damage(self, files: Sequence[Path], streams: Sequence[_Stream]) -> None:
+        """Bytes that could not be read and chunks skipped for their checksum (:attr:`ReadReport.damaged`)."""
+        self.report.lost_bytes = sum(s.lost_bytes for s in streams)
+        self.report.damaged = []
+        for f, s in zip(files, streams):
+            for offset, counts in s.damaged:
+                held = ", ".join(f"{s.channels.get(c, (f'channel {c}', 0))[0]} {n}" for c, n in sorted(counts.items()))
+                self.report.damaged.append(
+                    f"the chunk at byte {offset} of {f.name} fails its checksum (its data are corrupt): skipped"
+                    + (f"; its message indexes that could be read count {sum(counts.values())} message(s): {held}"
+                       if counts else "; its message indexes are lost too"))
 
     def close(self) -> None:
         if self._indexed is not None:
@@ -402,24 +521,28 @@ class BagReader:
         """The messages (of ``topics``, each of which the bag must have) in time order; what cannot be decoded is
         skipped and counted in :attr:`report`, and so is what ``metadata.yaml`` lists but the files lack.
 
-        Through the index while it works; if it fails before the first message (a chunk whose checksum does
-        not match, a broken index), the files are streamed instead; if it fails later, :class:`BagError` says
-        after how many messages."""
+        Through the index while it works.  If it fails (a chunk whose checksum does not match, a broken index),
+        the files are streamed instead, from where the index stopped: per topic, the messages it had handed out
+        are not delivered again."""
         self.check(topics)
         wanted = set(topics) if topics else set(self.topics)
+        delivered: dict[str, int] = defaultdict(int)
         if self._indexed is not None:
             try:
-                yield from self._indexed_messages(wanted)
+                yield from self._indexed_messages(wanted, delivered)
                 return
             except _IndexFailed as exc:
-                self.report.recovered = f"the index failed ({exc})"
+                self.report.recovered = f"the index failed after {sum(delivered.values())} messages ({exc})"
                 self.close()
-                self._load_streams()
-        yield from self._streamed_messages(wanted, listed_too=not topics)
+                try:
+                    self._load_streams()
+                except BagError as error:  # no file can be streamed either: what was delivered is all there is
+                    self.report.stopped = f"reading stopped after {sum(delivered.values())} messages: {error}"
+                    return
+        yield from self._streamed_messages(wanted, listed_too=not topics, given=delivered)
 
-    def _indexed_messages(self, wanted: set[str]) -> Iterator[BagMessage]:
+    def _indexed_messages(self, wanted: set[str], delivered: dict[str, int]) -> Iterator[BagMessage]:
         report = self.report
-        delivered: dict[str, int] = defaultdict(int)
         connections = [c for c in self._indexed.connections if c.topic in wanted]
         try:
             for connection, timestamp, raw in self._indexed.messages(connections=connections):
@@ -433,24 +556,23 @@ class BagReader:
                     continue
                 report.delivered += 1
                 yield BagMessage(connection.topic, connection.msgtype, timestamp, msg)
-        except Exception as exc:  # noqa: BLE001 - a corrupt chunk or index: stream the files, or say where it stopped
-            why = str(exc) or type(exc).__name__
-            if not any(delivered.values()):
-                raise _IndexFailed(why) from None
-            raise BagError(f"bag {str(self.path)!r} is unreadable after {report.delivered} messages: {why}") from None
+        except Exception as exc:  # noqa: BLE001 - a corrupt chunk or index: stream the files from here
+            raise _IndexFailed(str(exc) or type(exc).__name__) from None
         self._count_missing(wanted, delivered)
         if report.missing:
-            streams = [_stream(f) for f in self._files()]
-            report.lost_bytes = sum(s.lost_bytes for s in streams)
-            report.suspect = [f"chunk at byte {o}" for s in streams for o in s.suspect]
+            files = self._files()
+            self._damage(files, [_stream(f) for f in files])
 
-    def _streamed_messages(self, wanted: set[str], listed_too: bool) -> Iterator[BagMessage]:
+    def _streamed_messages(self, wanted: set[str], listed_too: bool,
+                           given: Mapping[str, int]) -> Iterator[BagMessage]:
+        """The messages of the streamed files, but per topic not the first ``given`` (handed out already)."""
         report = self.report
-        report.lost_bytes = sum(s.lost_bytes for s in self._streams)
-        report.suspect = [f"chunk at byte {o}" for s in self._streams for o in s.suspect]
         found: list[tuple[int, int, str, str, Decoder, bytes]] = []
         for index, s in enumerate(self._streams):
             for channel_id, log_time, raw in s.messages:
+                if channel_id not in s.channels:
+                    report.skip(f"channel {channel_id}", "unknown", "its channel record is not in the file")
+                    continue
                 topic, schema_id = s.channels[channel_id]
                 if topic not in wanted:
                     continue
@@ -460,6 +582,8 @@ class BagReader:
         read: dict[str, int] = defaultdict(int)
         for log_time, _index, topic, name, decoder, raw in found:
             read[topic] += 1
+            if read[topic] <= given.get(topic, 0):
+                continue
             msg, why = decode(decoder, raw)
             if msg is None:
                 report.skip(topic, name, why)

@@ -31,10 +31,15 @@ class Recorder:
     reliability and durability, :attr:`moose_ros.graph.Topic.tool_qos`).
 
     Messages are stamped on reception with the wall clock, never earlier than the previous one (a step
-    of the clock back would otherwise put them out of order).  A recorder killed with SIGKILL loses only
-    what it had not yet taken from its subscriptions (:mod:`moose_ros.bag.writer`).  ``parameters``: the run's
-    (:class:`~moose_ros.bag.params.RunParameters`), kept in the bag.
+    of the clock back would otherwise put them out of order).  A timer of the node closes the open chunk once
+    it has been open :data:`~moose_ros.bag.writer.CHUNK_SPAN_S`, so a recorder killed with SIGKILL loses at most
+    that much, and what it had not yet taken from its subscriptions (:mod:`moose_ros.bag.writer`).  A write
+    that fails (a full disk) stops the recording, not the graph: :attr:`error` says why and what the bag
+    holds.  ``parameters``: the run's (:class:`~moose_ros.bag.params.RunParameters`), kept in the bag.
     """
+
+    POLL_PERIOD = 0.05
+    """Period of the timer that closes chunks (s, wall clock)."""
 
     def __init__(self, node: Any, path: str | Path, topics: Optional[Sequence[str]] = None,
                  parameters: Optional[RunParameters] = None) -> None:
@@ -43,22 +48,37 @@ class Recorder:
         if unknown:
             raise BagError(f"--topics {unknown[0]!r} is not a topic of the graph; topics: {', '.join(TOPICS)}")
         self.writer = BagWriter(path, custom_data=parameters.as_strings() if parameters is not None else None)
+        self.error: Optional[str] = None
+        """Why recording stopped before :meth:`close` (a write failed), None while it works."""
         self._serialize = node.serialize  # the runtime's CDR: the same bytes on both runtimes
         self._last_ns = 0
         for topic in chosen:
             TOPICS[topic].tool_subscription(node, self._callback(topic))
+        node.timer(self.POLL_PERIOD, lambda: self._guarded(self.writer.poll))
+
+    def _guarded(self, action: Callable[[], None]) -> None:
+        """Run a write of the bag; a failure stops the recording and is kept in :attr:`error`."""
+        if self.error is not None:
+            return
+        try:
+            action()
+        except BagError as exc:
+            self.error = str(exc)
 
     def _callback(self, topic: str) -> Callable[[Any], None]:
         type_name, serialize = TOPICS[topic].type, self._serialize
 
         def record(msg: Any) -> None:
             self._last_ns = max(time.time_ns(), self._last_ns)
-            self.writer.write(topic, type_name, self._last_ns, serialize(msg))
+            self._guarded(lambda: self.writer.write(topic, type_name, self._last_ns, serialize(msg)))
 
         return record
 
     def close(self) -> None:
-        self.writer.close()
+        """Close the bag; a failure is kept in :attr:`error` (the bag then ends at its last checkpoint)."""
+        self._guarded(self.writer.close)
+        if self.error is not None:
+            self.writer.close()  # the file, after a failure
 
 
 def record_result(result: Any, path: str | Path) -> dict[str, int]:
@@ -146,10 +166,11 @@ def record_result(result: Any, path: str | Path) -> dict[str, int]:
 
 def record_simulation(result: Any, path: str | Path) -> dict[str, int]:
     """``moose simulate``'s bag recorder (entry point group ``moose.recorders``): :func:`record_result`, with
-    a bag that cannot be written reported as a :class:`~moose.params.ParamError`."""
-    from moose.params import ParamError
+    a bag that cannot be written (its path was checked before the run: a full disk) reported as an
+    :class:`~moose.files.OutputError`."""
+    from moose.files import OutputError
 
     try:
         return record_result(result, path)
     except BagError as exc:
-        raise ParamError(str(exc)) from None
+        raise OutputError(str(exc)) from None

@@ -5,18 +5,20 @@ the first one after detection drawn bold."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, Optional
 
 from ..convert import MARKER_COLOURS
 from ..graph import FRAME_BASE, MARKERS, ODOM, TF
 from .errors import BagError
-from .reader import BagReader
+from .reader import BagReader, ReadReport
 
 _LABELS = {"mpc": "MPC prediction", "msf": "MSF prediction", "blend": "blended plan"}
 
 
-def plot_birdseye(path: str | Path, out: str | Path, title: str = "") -> Path:
-    """Draw the bird's-eye view of bag ``path`` into ``out`` (PNG); returns ``out``."""
+def plot_birdseye(path: str | Path, out: str | Path, title: str = "", report: Optional[ReadReport] = None) -> Path:
+    """Draw the bird's-eye view of bag ``path`` into ``out`` (PNG); returns ``out``.  Pass a
+    :class:`~moose_ros.bag.reader.ReadReport` to learn what could not be read (a truncated bag is drawn as far
+    as it goes)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -26,7 +28,7 @@ def plot_birdseye(path: str | Path, out: str | Path, title: str = "") -> Path:
     truth: list[tuple[float, float]] = []
     estimate: list[tuple[float, float]] = []
     instants: list[Any] = []
-    reader = BagReader(path)
+    reader = BagReader(path, report)
     try:
         needed = (ODOM.name, MARKERS.name)
         if not set(needed) <= set(reader.topics):

@@ -1,31 +1,48 @@
-"""Write a ROS 2 bag directory (``metadata.yaml`` + one MCAP file) that survives a killed writer.
+"""Write a ROS 2 bag directory (``metadata.yaml`` + one MCAP file) that is a valid bag at every checkpoint.
 
-The MCAP file is written with the ``mcap`` library's public writer, without chunks: every record
-goes to the file as it comes, and the file is flushed to the operating system after each message,
-so a writer killed with SIGKILL loses no message it had written (the file then lacks its summary
-and footer, and ``metadata.yaml`` is missing: :func:`moose_ros.bag.reader.read_bag` streams such a
-file record by record).  The file is also fsync'ed at least every ``fsync_period`` seconds of
-writing, which bounds what a power loss can take.  :meth:`BagWriter.close` writes the summary, the
-footer and ``metadata.yaml`` (rosbag2 format version 9).  Message definitions (``ros2msg``) and
-type hashes (RIHS01) come from rosbags' type store, so ``ros2 bag``, rosbags and Foxglove read
-the bag.  Each topic of the graph contract carries its publishers' QoS as ``offered_qos_profiles``
-(rosbag2's version-9 form), so ``ros2 bag play`` offers it again: ``/tf_static`` stays transient
-local for RViz.  ``custom_data`` (strings) goes into ``metadata.yaml`` and, at once, into an MCAP
-metadata record (:mod:`.params`).
+The MCAP file is chunked by the ``mcap`` library's public writer: zstd-compressed chunks, each with the CRC-32
+of its records, so a reader detects a damaged chunk, skips it and goes on with the next
+(:mod:`moose_ros.bag.reader`).  A chunk is closed, at the latest, once it spans :data:`CHUNK_SPAN_S` of message
+time or has been open that long on the wall clock (:meth:`BagWriter.poll`, which the live recorder calls from a
+timer, so a chunk is closed also when messages stop coming), or holds :data:`CHUNK_BYTES`.
 
-Messages must be written in time order (rosbags reads an MCAP file without chunk indexes in file
-order); an earlier timestamp is a :class:`BagError`.
+**Checkpoints.**  Closing a chunk is a checkpoint: everything since the previous one (the chunk, its message
+indexes, new schema and channel records) and then a data end record, a footer without summary and the closing
+magic go to the file in one write, over the previous checkpoint's footer.  After every checkpoint the file is a
+complete MCAP file (its footer says "no summary": readers scan it), which ``mcap``'s own readers, rosbags and
+Foxglove open; ``metadata.yaml`` (rosbag2 format version 9) is rewritten with it whenever a topic was added, else
+at most every ``fsync_period`` of wall time (rosbags reads every message of the file, and lists the topics
+``metadata.yaml`` names).  The space a checkpoint needs is reserved first (``posix_fallocate``), so a full disk
+fails before anything is written and leaves the previous checkpoint's file intact.  A recorder killed with
+SIGKILL therefore leaves a valid bag of every message up to its last checkpoint: it loses what was in the open
+chunk (at most :data:`CHUNK_SPAN_S` of recording) and what its DDS readers still held.  The file is fsync'ed at
+a checkpoint at least every ``fsync_period`` seconds, which bounds what a power loss can take.
+
+Schema and channel records are also written outside the chunks (the writer repeats them inside, as the mcap
+library does): a damaged chunk then never takes the definition of a topic with it.  :meth:`BagWriter.close`
+writes the summary (schemas, channels, statistics, chunk indexes) and the final ``metadata.yaml``.
+
+Message definitions (``ros2msg``) and type hashes (RIHS01) come from rosbags' type store, so ``ros2 bag``,
+rosbags and Foxglove read the bag.  Each topic of the graph contract carries its publishers' QoS as
+``offered_qos_profiles`` (rosbag2's version-9 form), so ``ros2 bag play`` offers it again: ``/tf_static`` stays
+transient local for RViz.  ``custom_data`` (strings) goes into ``metadata.yaml`` and, at once, into an MCAP
+metadata record (:mod:`.params`).  Messages must be written in time order; an earlier timestamp is a
+:class:`BagError`.  A write that fails (a full disk) is a :class:`BagError` saying what the bag holds; the
+writer then takes no more messages.
 """
 from __future__ import annotations
 
+import errno
 import os
 import time
 from collections import defaultdict
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
-from typing import Any
+from typing import Any, Optional
 
 import yaml
+from mcap.data_stream import RecordBuilder
+from mcap.records import Channel, DataEnd, Footer, Schema
 from mcap.writer import CompressionType, Writer
 
 from ..graph import TOPICS
@@ -36,6 +53,13 @@ from .params import METADATA_NAME
 
 ROSBAG2_VERSION = 9
 """rosbag2 metadata version (ROS 2 Jazzy)."""
+CHUNK_SPAN_S = 0.25
+"""Longest a chunk stays open (s of message time, and of wall time through :meth:`BagWriter.poll`): what a
+SIGKILL can take from a recording, and the most one damaged chunk takes from a bag."""
+CHUNK_BYTES = 1024 * 1024
+"""Most uncompressed bytes of messages in a chunk (a burst closes it earlier than :data:`CHUNK_SPAN_S`)."""
+MAGIC = b"\x89MCAP0\r\n"
+"""The MCAP file's opening and closing magic (MCAP specification, version 0)."""
 
 
 def _library() -> str:
@@ -43,6 +67,17 @@ def _library() -> str:
         return f"moose_ros-{version('moose_ros')}"
     except PackageNotFoundError:
         return "moose_ros"
+
+
+def _records(*records: Any) -> bytes:
+    builder = RecordBuilder()
+    for record in records:
+        record.write(builder)
+    return bytes(builder.end())
+
+
+TAIL = _records(DataEnd(0), Footer(summary_start=0, summary_offset_start=0, summary_crc=0)) + MAGIC
+"""What ends the file at a checkpoint: the data section's end, a footer without summary, the magic."""
 
 
 def offered_qos(qos: Qos) -> dict[str, Any]:
@@ -59,12 +94,32 @@ def _offered(topic: str) -> list[dict[str, Any]]:
     return [offered_qos(contract.qos)] if contract is not None else []
 
 
+class _Staged:
+    """The stream the mcap writer writes into: held here until the next checkpoint puts it on the file at
+    :attr:`base`, the offset where the previous checkpoint's :data:`TAIL` begins."""
+
+    def __init__(self) -> None:
+        self.base = 0
+        self.buffer = bytearray()
+
+    def write(self, data: bytes) -> int:
+        self.buffer += data
+        return len(data)
+
+    def tell(self) -> int:
+        return self.base + len(self.buffer)
+
+    def flush(self) -> None:
+        """The file is written at checkpoints (:meth:`BagWriter._checkpoint`), not here."""
+
+
 class BagWriter:
-    """A new ROS 2 bag directory with MCAP storage; every message reaches the OS as it is written.
+    """A new ROS 2 bag directory with MCAP storage, a valid bag after every checkpoint (module doc).
 
     ``custom_data``: strings kept with the bag (the run's parameters, :mod:`.params`)."""
 
-    def __init__(self, path: str | Path, fsync_period: float = 1.0, custom_data: dict[str, str] | None = None) -> None:
+    def __init__(self, path: str | Path, fsync_period: float = 1.0, custom_data: dict[str, str] | None = None,
+                 chunk_span: float = CHUNK_SPAN_S) -> None:
         self.path = Path(path)
         if self.path.exists():
             raise BagError(f"bag {str(self.path)!r} exists already: choose another output directory")
@@ -75,10 +130,11 @@ class BagWriter:
                 raise BagError(f"bag {str(self.path)!r} cannot be written: {str(parent)!r} is not writable")
             self.path.mkdir()
             self.file = self.path / f"{self.path.name}_0.mcap"
-            self._stream = open(self.file, "xb")  # noqa: SIM115 - closed by close()
+            self._fd: Optional[int] = os.open(self.file, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o644)
         except OSError as exc:
             raise BagError(f"bag {str(self.path)!r} cannot be written: {exc.strerror or exc}") from None
-        self._mcap = Writer(self._stream, use_chunking=False, compression=CompressionType.NONE)
+        self._staged = _Staged()
+        self._mcap = Writer(self._staged, chunk_size=4 * CHUNK_BYTES, compression=CompressionType.ZSTD)  # type: ignore[arg-type]
         self._mcap.start(profile="ros2", library=_library())
         self.custom_data = dict(custom_data or {})
         if self.custom_data:
@@ -90,8 +146,21 @@ class BagWriter:
         self.first_ns: int | None = None
         self.last_ns: int | None = None
         self.fsync_period = fsync_period
-        self._last_sync = time.monotonic()
-        self._stream.flush()
+        self.chunk_span = chunk_span
+        self.saved = 0
+        """Messages on the file (up to the last checkpoint)."""
+        self._saved_until: Optional[int] = None
+        self.failed = ""
+        """Why writing stopped (a :class:`BagError` said so); "" while it works."""
+        self._open_since: Optional[tuple[int, float]] = None  # (log time, monotonic time) of the open chunk's first
+        self._open_bytes = 0
+        self._listed: set[str] = set()  # the topics metadata.yaml names
+        self._listed_at = self._last_sync = time.monotonic()
+        try:
+            self._checkpoint(metadata=True)  # a valid, empty bag with the run's parameters from the start
+        except BagError:
+            self.close()
+            raise
 
     def _channel(self, topic: str, type_name: str) -> int:
         known = self._channels.get(topic)
@@ -99,39 +168,109 @@ class BagWriter:
             if known[1] != type_name:
                 raise BagError(f"bag {str(self.path)!r}: topic {topic!r} carries {known[1]!r}, not {type_name!r}")
             return known[0]
+        outside: list[Any] = []  # also written outside the chunks: a damaged chunk cannot take the definitions with it
         if type_name not in self._schemas:
             msgdef, _ = self._store.generate_msgdef(type_name, ros_version=2)
-            self._schemas[type_name] = self._mcap.register_schema(type_name, "ros2msg", msgdef.encode())
+            schema = self._schemas[type_name] = self._mcap.register_schema(type_name, "ros2msg", msgdef.encode())
+            outside.append(Schema(id=schema, data=msgdef.encode(), encoding="ros2msg", name=type_name))
         offered = yaml.safe_dump(_offered(topic), sort_keys=False) if topic in TOPICS else ""
-        channel = self._mcap.register_channel(topic, "cdr", self._schemas[type_name], {"offered_qos_profiles": offered})
+        metadata = {"offered_qos_profiles": offered}
+        channel = self._mcap.register_channel(topic, "cdr", self._schemas[type_name], metadata)
+        outside.append(Channel(id=channel, topic=topic, message_encoding="cdr", metadata=metadata,
+                               schema_id=self._schemas[type_name]))
+        self._staged.write(_records(*outside))
         self._channels[topic] = (channel, type_name)
         return channel
 
     def write(self, topic: str, type_name: str, timestamp_ns: int, cdr: bytes) -> None:
         """Append one CDR-serialised message stamped ``timestamp_ns`` (not earlier than the previous one)."""
+        if self.failed:
+            raise BagError(self.failed)
         timestamp_ns = int(timestamp_ns)
         if self.last_ns is not None and timestamp_ns < self.last_ns:
             raise BagError(f"bag {str(self.path)!r}: {topic} at {timestamp_ns} ns is earlier than the previous "
                            f"message ({self.last_ns} ns); messages are written in time order")
+        if self._open_since is not None and timestamp_ns - self._open_since[0] >= self.chunk_span * 1e9:
+            self._checkpoint()
         channel = self._channel(topic, type_name)
-        try:
-            self._mcap.add_message(channel, log_time=timestamp_ns, data=cdr, publish_time=timestamp_ns,
-                                   sequence=self.counts[topic] % 2**32)
-            self._stream.flush()
-            if time.monotonic() - self._last_sync >= self.fsync_period:
-                self.sync()
-        except OSError as exc:
-            raise BagError(f"bag {str(self.path)!r}: write failed ({exc.strerror}); "
-                           "the bag is readable up to here") from None
+        self._mcap.add_message(channel, log_time=timestamp_ns, data=cdr, publish_time=timestamp_ns,
+                               sequence=self.counts[topic] % 2**32)
         self.counts[topic] += 1
         self.first_ns = timestamp_ns if self.first_ns is None else self.first_ns
         self.last_ns = timestamp_ns
+        if self._open_since is None:
+            self._open_since = (timestamp_ns, time.monotonic())
+        self._open_bytes += len(cdr)
+        if self._open_bytes >= CHUNK_BYTES:
+            self._checkpoint()
 
-    def sync(self) -> None:
-        """Push what was written to the disk (fsync)."""
-        self._stream.flush()
-        os.fsync(self._stream.fileno())
+    def poll(self) -> None:
+        """Checkpoint if the open chunk has been open :attr:`chunk_span` on the wall clock (a live recorder calls
+        this from a timer: a chunk is closed in time also when messages stop coming)."""
+        if not self.failed and self._open_since is not None and \
+                time.monotonic() - self._open_since[1] >= self.chunk_span:
+            self._checkpoint()
+
+    def _checkpoint(self, metadata: bool = False) -> None:
+        """Close the open chunk and put everything since the last checkpoint on the file, then :data:`TAIL`."""
+        self._mcap.flush()  # the open chunk and its message indexes, into the staged bytes
+        self._put(bytes(self._staged.buffer) + TAIL)
+        self._staged.base += len(self._staged.buffer)
+        self._staged.buffer.clear()
+        self._open_since, self._open_bytes = None, 0
+        self.saved, self._saved_until = sum(self.counts.values()), self.last_ns
+        now = time.monotonic()
+        if metadata or set(self._channels) - self._listed or now - self._listed_at >= self.fsync_period:
+            self._write_metadata()
+        if now - self._last_sync >= self.fsync_period:
+            self._sync()
+
+    def _put(self, data: bytes, truncate: bool = False) -> None:
+        """Write ``data`` at the staged base offset in one write, after reserving its space (a full disk fails
+        here, with nothing written)."""
+        assert self._fd is not None
+        offset = self._staged.base
+        try:
+            if hasattr(os, "posix_fallocate"):
+                try:
+                    os.posix_fallocate(self._fd, offset, len(data))
+                except OSError as exc:
+                    if exc.errno not in (errno.EOPNOTSUPP, errno.EINVAL):  # a file system without it: write
+                        raise
+            view = memoryview(data)
+            while view:
+                written = os.pwrite(self._fd, view, offset)
+                view, offset = view[written:], offset + written
+            if truncate:
+                os.ftruncate(self._fd, offset)
+        except OSError as exc:
+            self._fail(exc)
+
+    def _fail(self, exc: OSError) -> None:
+        held = "no message" if not self.saved else \
+            f"{self.saved} messages ({((self._saved_until or 0) - (self.first_ns or 0)) * 1e-9:.2f} s of recording)"
+        self.failed = (f"bag {str(self.path)!r}: writing failed ({exc.strerror or exc}); the bag holds {held} "
+                       "and is readable, later messages are not recorded")
+        raise BagError(self.failed) from None
+
+    def _sync(self) -> None:
+        assert self._fd is not None
+        try:
+            os.fsync(self._fd)
+        except OSError as exc:
+            self._fail(exc)
         self._last_sync = time.monotonic()
+
+    def _write_metadata(self) -> None:
+        """``metadata.yaml`` of what the file holds, replaced atomically."""
+        info = self.metadata()
+        try:
+            tmp = self.path / "metadata.yaml.tmp"
+            tmp.write_text(yaml.safe_dump({"rosbag2_bagfile_information": info}, sort_keys=True), encoding="utf-8")
+            tmp.replace(self.path / "metadata.yaml")
+        except OSError as exc:
+            self._fail(exc)
+        self._listed, self._listed_at = set(self._channels), time.monotonic()
 
     def metadata(self) -> dict[str, Any]:
         """The ``rosbag2_bagfile_information`` of what was written."""
@@ -161,18 +300,19 @@ class BagWriter:
         }
 
     def close(self) -> None:
-        """Write the MCAP summary and footer, then ``metadata.yaml`` (atomically)."""
-        if self._stream.closed:
+        """Write the last chunk, the summary and the footer, then the final ``metadata.yaml``.  After a failed
+        write only the file is closed: it stays as its last checkpoint left it."""
+        if self._fd is None:
             return
-        info = self.metadata()
         try:
-            self._mcap.add_metadata("rosbag2", {"serialized_metadata": yaml.safe_dump(info, sort_keys=True)})
-            self._mcap.finish()
-            self.sync()
-            self._stream.close()
-            tmp = self.path / "metadata.yaml.tmp"
-            tmp.write_text(yaml.safe_dump({"rosbag2_bagfile_information": info}, sort_keys=True), encoding="utf-8")
-            tmp.replace(self.path / "metadata.yaml")
-        except OSError as exc:
-            raise BagError(f"bag {str(self.path)!r}: closing failed ({exc.strerror}); the bag is readable up to the "
-                           "last message") from None
+            if not self.failed:
+                info = self.metadata()
+                self._mcap.add_metadata("rosbag2", {"serialized_metadata": yaml.safe_dump(info, sort_keys=True)})
+                self._mcap.finish()
+                self._put(bytes(self._staged.buffer), truncate=True)
+                self.saved, self._saved_until = sum(self.counts.values()), self.last_ns
+                self._sync()
+                self._write_metadata()
+        finally:
+            os.close(self._fd)
+            self._fd = None

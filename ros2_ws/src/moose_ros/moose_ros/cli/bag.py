@@ -1,9 +1,11 @@
-"""``moose bag``: record, play, inspect, export and re-plan ROS 2 bags (MCAP).
+"""``moose bag``: record, play, inspect, export, view and re-plan ROS 2 bags (MCAP).
 
-Reading commands (info, play, export, replan) report every message they could not read on stderr
-(``moose: warning: …``) and then exit with status 1 (:data:`moose.cli.common.EXIT_FAILED`); a topic the bag
-does not have, a topic of the graph with another type, or an unusable output path is an error (status 2)
-before anything is done.
+Reading commands (info, play, export, replan, view) deliver everything they can read — a damaged chunk is
+skipped, a truncated or unfinished recording is read to its end — then report every message they could not
+read on stderr (``moose: warning: …``) and exit with status 1 (:data:`moose.cli.common.EXIT_FAILED`); a topic
+the bag does not have, a topic of the graph with another type, or an unusable output path is an error (status
+2) before anything is done.  ``record`` whose bag cannot be written any more (a full disk) stops recording and
+exits with status 5 (:data:`moose.cli.common.EXIT_OUTPUT`); the bag holds what was recorded up to then.
 """
 from __future__ import annotations
 
@@ -14,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from moose.cli.common import EXIT_CLEAR, EXIT_FAILED, check_output_file, plot_suffixes, positive_float, run_folder
+from moose.files import OutputError
 from moose.params import ParamError
 from moose.schema import PLANNER_MODES
 
@@ -98,7 +101,9 @@ def cmd_bag(args: argparse.Namespace) -> int:
             if plot is not None:
                 print(f"figure {bag.plot_replan(result['rows'], plot)}")
         elif args.bag_command == "view":
-            print(f"figure {bag.plot_birdseye(args.path, args.output)}")
+            out = check_output_file("-o", args.output, plot_suffixes())
+            assert out is not None  # -o is required
+            print(f"figure {bag.plot_birdseye(args.path, out, report=report)}")
         elif args.bag_command == "record":
             return _record(bag, args)
         elif args.bag_command == "play":
@@ -138,5 +143,7 @@ def _record(bag: Any, args: argparse.Namespace) -> int:
             node.spin_once(0.05)
     finally:
         recorder.close()
+    if recorder.error is not None:
+        raise OutputError(recorder.error)
     print(f"recorded {dict(recorder.writer.counts)}")
     return 0

@@ -3,7 +3,8 @@
 Exit status: 0 ``clear``; 1 a failure outcome (``collision``, ``left_field``, ``lost_control``,
 ``stopped_short``); 2 bad input (nothing started); 3 ``incomplete`` (too little odometry, or the run was cut
 short: SIGTERM, a node that failed to start, the simulator gone); 4 ``clear`` but degraded (a node failed,
-stalled or was faulted, a fallback or a minimum-risk maneuver ran); 130 Ctrl-C.
+stalled or was faulted, a fallback or a minimum-risk maneuver ran); 5 the bag or ``--json`` could not be written
+(a full disk: the summary is printed above the error, the bag ends at its last checkpoint); 130 Ctrl-C.
 """
 from __future__ import annotations
 
@@ -19,8 +20,10 @@ from moose.cli.common import (
     positive_float,
     run_folder,
     scenario_from_args,
+    write_output,
 )
 from moose.cli.simulate import format_summary
+from moose.files import OutputError
 from moose.params import ParamError
 
 from ..graph import GRAPHS
@@ -85,10 +88,15 @@ def cmd_launch(args: argparse.Namespace) -> int:
         raise ParamError(str(exc)) from None
     print(format_launch_summary(summary))
     print(f"runtime         {', '.join(f'{name} {rt}' for name, rt in summary['runtime'].items())}")
-    if bag is not None:
+    failures = [summary["bag_error"]] if summary["bag_error"] else []
+    if bag is not None and not failures:
         print(f"bag             {bag}")
     if json_path is not None:
-        json_path.write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+        text = json.dumps(summary, indent=2, allow_nan=False) + "\n"
+        failure = write_output("--json", json_path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+        failures += [failure] if failure else []
+    if failures:
+        raise OutputError("; ".join(failures))
     return int(summary["exit_status"])
 
 
