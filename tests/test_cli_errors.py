@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -21,6 +23,7 @@ import pytest
 
 from moose.cli.common import EXIT_BAD_INPUT, EXIT_CLEAR, EXIT_FAILED, EXIT_INCOMPLETE, OUTCOME_EXIT, outcome_exit_status
 from moose.resources import SCENARIO_DIR
+from moose.sweep.store import read_results
 from moose.verdict import OUTCOMES
 
 MOOSE = [sys.executable, "-m", "moose.cli"]
@@ -245,6 +248,11 @@ def tiny_disk(tmp_path: Path) -> Iterator[Callable[[int], Path]]:
             subprocess.run(["umount", "-l", str(point)], capture_output=True, timeout=30)
 
 
+def grow(point: Path, kib: int) -> None:
+    """Make room on a tiny disk."""
+    subprocess.run(["mount", "-o", f"remount,size={kib}k", str(point)], check=True, capture_output=True, timeout=30)
+
+
 def test_a_full_disk_under_the_bag_reports_the_verdict_then_the_output_error(
         tmp_path: Path, tiny_disk: Callable[[int], Path], capsys: pytest.CaptureFixture[str]) -> None:
     """The probe: ``simulate --bag`` on a full tmpfs printed CLEAR and exited 2 ("bad input, nothing was run").
@@ -264,6 +272,84 @@ def test_a_full_disk_under_the_bag_reports_the_verdict_then_the_output_error(
     report = ReadReport(str(bag))
     held = len(list(read_bag(bag, report=report)))
     assert f"the bag holds {held} messages" in err and held > 0 and report.unfinished and not report.lost_bytes
+
+
+def test_a_sweep_on_a_full_disk_keeps_its_rows_and_a_corrupt_row_is_run_again(
+        tiny_disk: Callable[[int], Path], capsys: pytest.CaptureFixture[str]) -> None:
+    """The probe: ``sweep -o`` on a full disk ended in a traceback, and a corrupt middle line of cases.jsonl was
+    skipped on --resume without a word.  Now: exit 5 naming the case that could not be recorded, the rows before
+    it kept; --resume, once there is room, runs the rest; a corrupt row is reported and its case run again."""
+    from moose.cli.common import EXIT_OUTPUT
+
+    disk = tiny_disk(16)  # the manifest and config.yaml take a page each, the journal one: two rows or so
+    out_dir = disk / "sweep"
+    sweep = ["sweep", "--speed", "5", "--tau", "2", "--nu", "0.2,0.4,0.6,0.8", "--duration", "2", "--workers", "1",
+             "--quiet", "-o", str(out_dir)]
+    done = here(capsys, *sweep)
+    code, err = done.returncode, done.stderr
+    assert code == EXIT_OUTPUT and "Traceback" not in err
+    assert f"moose: error: -o {str(out_dir)!r}: case " in err and "No space left on device" in err
+    kept = [json.loads(line) for line in (out_dir / "cases.jsonl").read_text().split("\n")[:-1]]
+    assert 0 < len(kept) < 4
+    grow(disk, 1024)
+    done = here(capsys, *sweep, "--resume")
+    code, err = done.returncode, done.stderr
+    assert code == 0 and "Traceback" not in err
+    lines = (out_dir / "cases.jsonl").read_text().splitlines()
+    rows = [json.loads(line) for line in lines if line.startswith("{") and line.endswith("}")]
+    assert {r["case_id"] for r in rows} >= {r["case_id"] for r in kept} and len({r["case_id"] for r in rows}) == 4
+    middle = next(i for i, line in enumerate(lines) if line == json.dumps(rows[1], allow_nan=False))
+    lines[middle] = lines[middle][:40] + "\x00garbage" + lines[middle][48:]
+    (out_dir / "cases.jsonl").write_text("\n".join(lines) + "\n")
+    done = here(capsys, *sweep, "--resume")
+    code, out, err = done.returncode, done.stdout, done.stderr
+    listed = re.search(r"line\(s\) ([\d, ]+) are not rows of a case", err)
+    assert code == 0 and listed and str(middle + 1) in listed.group(1).split(", ")  # and a line the disk cut, if any
+    assert "ran             1 cases" in out  # that case, again
+    assert len(read_results(out_dir)) == 4
+
+
+class _Service:
+    """A TCP service on loopback that is not a Dask scheduler: it greets with ``banner`` (or says nothing)."""
+
+    def __init__(self, banner: bytes) -> None:
+        self.server = socket.create_server(("127.0.0.1", 0))
+        self.address = f"tcp://127.0.0.1:{self.server.getsockname()[1]}"
+        self.banner, self.clients = banner, []
+        threading.Thread(target=self._serve, daemon=True).start()
+
+    def _serve(self) -> None:
+        while True:
+            try:
+                client, _ = self.server.accept()
+            except OSError:
+                return
+            self.clients.append(client)
+            if self.banner:
+                client.sendall(self.banner)
+
+    def close(self) -> None:
+        self.server.close()
+        for client in self.clients:
+            client.close()
+
+
+@pytest.mark.parametrize("banner, words", [(b"SSH-2.0-OpenSSH_9.6\r\n", "is not a Dask scheduler (it opened with"),
+                                           (b"", "no Dask scheduler answers")])
+def test_a_service_that_is_not_dask_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str], banner: bytes,
+                                               words: str) -> None:
+    """The probe: an SSH server on --address made distributed allocate 3 EiB (ArrayMemoryError) and print two
+    tracebacks."""
+    service = _Service(banner)
+    try:
+        start = time.monotonic()
+        result = here(capsys, "sweep", "--speed", "5", "--tau", "2", "--nu", "0.5", "--quiet",
+                          "-o", str(tmp_path / "s"), "--address", service.address, "--connect-timeout", "2")
+        assert time.monotonic() - start < 30
+    finally:
+        service.close()
+    refused(result, f"--address {service.address!r}", words)
+    assert not (tmp_path / "s").exists()
 
 
 def _fifo_unblocker(path: Path, after: float) -> threading.Thread:

@@ -3,7 +3,8 @@ parameter, locally or on a Dask cluster; ``moose sweep plot DIR`` draws the maps
 
 Every input is checked before the first case runs; see :mod:`moose.sweep`.  Exit status: 0 when every
 case ran and was judged, 3 when some case of the sweep ended in ``error``, ``timeout`` or ``crashed``
-(its row says why), 130 when interrupted (``--resume`` continues), 2 for bad input.
+(its row says why), 130 when interrupted (``--resume`` continues), 2 for bad input, 5 when a row could not be
+recorded (a full disk: the rows before it are kept, ``--resume`` continues).
 """
 from __future__ import annotations
 
@@ -137,6 +138,11 @@ def cmd_sweep(args: argparse.Namespace) -> int:
               "constant speed would pass the obstacle: they may end stopped_short", file=sys.stderr)
     output = Path(args.output) if args.output else Path("runs") / f"sweep-{time.strftime('%Y%m%d-%H%M%S')}"
     folder = RunFolder.open(output, spec, args.resume)
+    folder.rows()
+    if folder.damaged:
+        lines = ", ".join(map(str, folder.damaged))
+        print(f"moose: warning: {output / 'cases.jsonl'}: line(s) {lines} are not rows of a case (cut short by a kill, "
+              "or corrupt) and are skipped; a case without a row runs again", file=sys.stderr)
     if (args.backend or ("dask" if args.address else "local")) == "dask":
         if not args.address:
             raise ParamError("--backend dask needs --address tcp://HOST:PORT of the scheduler")

@@ -10,7 +10,8 @@ gives the same rows on either (``tests/test_sweep.py`` checks it on a local two-
   seconds (stuck in compiled code, where the in-thread timeout cannot reach it) is killed and its
   case recorded as ``timeout``.  Workers ignore SIGINT: Ctrl-C reaches the parent, which stops them.
 * :class:`DaskBackend` — a ``distributed`` client on ``address``.  Before any case it checks that a
-  scheduler answers within ``connect_timeout`` and that every worker runs the same moose source
+  scheduler answers within ``connect_timeout`` (and that what answers speaks Dask's protocol at all,
+  :func:`speaks_dask`) and that every worker runs the same moose source
   (:func:`moose.sweep.store.code_version`).  A worker lost under a case twice is Dask's
   ``KilledWorker``: that case is recorded as ``crashed``.  The cluster is the user's: it is never
   shut down, only the client is closed.
@@ -153,6 +154,47 @@ class LocalBackend:
                           time.monotonic() - worker.started, f"pid {worker.process.pid}")
 
 
+HANDSHAKE_LIMIT = 1 << 20
+"""Largest first message accepted from a scheduler (bytes); Dask's handshake is a few hundred."""
+
+
+def speaks_dask(address: str, timeout: float) -> None:
+    """:class:`ParamError` unless the TCP service at ``address`` opens as a Dask scheduler does: with a message
+    whose 8-byte length (native byte order, as ``distributed.comm.tcp`` frames it) is small.  Another service
+    (SSH, HTTP) would otherwise have its first bytes taken as a length and allocated: exabytes, or gigabytes
+    filled while waiting.  Addresses other than ``tcp://`` are left to ``distributed``."""
+    import socket
+    import struct
+
+    from distributed.comm import parse_address, parse_host_port
+
+    try:
+        scheme, location = parse_address(address)
+        host, port = parse_host_port(location)
+    except ValueError as exc:
+        raise ParamError(f"--address {address!r} is invalid: {exc}") from None
+    if scheme != "tcp":
+        return
+    try:
+        with socket.create_connection((host, port), timeout=timeout) as sock:
+            head = b""
+            while len(head) < 8:
+                data = sock.recv(8 - len(head))
+                if not data:
+                    break
+                head += data
+    except OSError as exc:  # refused, unreachable, timed out: nothing answers
+        raise ParamError(f"--address {address!r}: no Dask scheduler answers ({type(exc).__name__}: "
+                         f"{exc.strerror or exc})") from None
+    if len(head) < 8:
+        raise ParamError(f"--address {address!r}: no Dask scheduler answers (the service closed the connection "
+                         f"after {len(head)} bytes)")
+    (length,) = struct.unpack("Q", head)
+    if not 0 < length <= HANDSHAKE_LIMIT:
+        raise ParamError(f"--address {address!r}: the service there is not a Dask scheduler (it opened with "
+                         f"{head!r})")
+
+
 class DaskBackend:
     """An existing Dask distributed cluster (``tcp://host:port`` of its scheduler)."""
 
@@ -166,9 +208,10 @@ class DaskBackend:
         from .store import code_version
 
         self.base, self.timeout = base, timeout
+        speaks_dask(address, connect_timeout)
         try:
             self.client = Client(address, timeout=f"{connect_timeout}s", set_as_default=False)
-        except (OSError, TimeoutError, ValueError) as exc:
+        except Exception as exc:  # noqa: BLE001 - OSError, TimeoutError, ValueError, MemoryError from a bad peer
             raise ParamError(f"--address {address!r}: no Dask scheduler answers "
                              f"({type(exc).__name__}: {exc})") from None
         try:

@@ -9,8 +9,11 @@
     DIR/results.parquet  the same rows as a table (written at the end, on Ctrl-C and on --resume)
 
 The journal is the record: a row is in it as soon as its case ends, so an interrupted or killed
-sweep loses only the cases that were running.  ``results.parquet`` is rebuilt from it (a last line
-cut short by a kill is ignored).  A folder that holds another sweep (another spec hash) is refused.
+sweep loses only the cases that were running.  ``results.parquet`` is rebuilt from it.  A line that is
+not a row (the last one cut short by a kill, or a corrupt one) is skipped and reported, and its case runs
+again on ``--resume``.  A folder that holds another sweep (another spec hash) is refused; one where no file
+can be created is refused before any case runs; a row that cannot be written (a full disk) ends the sweep
+with an :class:`~moose.files.OutputError`, the rows before it kept.
 """
 from __future__ import annotations
 
@@ -24,6 +27,7 @@ from typing import IO, Any, Iterable, Optional
 
 import yaml
 
+from ..files import OutputError
 from ..params import ParamError
 from .spec import SweepSpec
 
@@ -68,6 +72,8 @@ class RunFolder:
     def __init__(self, path: Path) -> None:
         self.path = Path(path)
         self._journal: Optional[IO[str]] = None
+        self.damaged: list[int] = []
+        """Line numbers of the journal that are not rows (found by the last :meth:`rows`)."""
 
     @classmethod
     def open(cls, path: Path, spec: SweepSpec, resume: bool) -> "RunFolder":
@@ -86,7 +92,23 @@ class RunFolder:
                                  "--resume continues it")
         elif path.exists() and any(path.iterdir()):
             raise ParamError(f"-o {str(path)!r} is invalid: the folder is not empty and holds no sweep ({MANIFEST})")
+        folder._check_writable()
         return folder
+
+    def _check_writable(self) -> None:
+        """:class:`ParamError` unless files can be created in the folder (a new one is created, tried and removed
+        again; its parents are kept)."""
+        import tempfile
+
+        new = not self.path.exists()
+        try:
+            self.path.mkdir(parents=True, exist_ok=True)
+            with tempfile.TemporaryFile(dir=self.path):
+                pass
+            if new:
+                self.path.rmdir()
+        except OSError as exc:
+            raise ParamError(f"-o {str(self.path)!r} cannot be written: {exc.strerror or exc}") from None
 
     def manifest(self) -> Optional[dict[str, Any]]:
         path = self.path / MANIFEST
@@ -129,39 +151,51 @@ class RunFolder:
 
     # -- the journal -------------------------------------------------------------------------------
     def rows(self) -> list[dict[str, Any]]:
-        """Every recorded row, the last of each case id (a truncated last line is skipped)."""
+        """Every recorded row, the last of each case id.  A line that is not a row (cut short by a kill, or
+        corrupt) is skipped and counted in :attr:`damaged`: its case is not done, so ``--resume`` runs it again."""
         path = self.path / JOURNAL
         if not path.exists():
             return []
         rows: dict[str, dict[str, Any]] = {}
-        with open(path, encoding="utf-8") as handle:
-            for line in handle:
+        self.damaged = []
+        with open(path, encoding="utf-8", errors="replace") as handle:
+            for number, line in enumerate(handle, 1):
                 try:
                     row = json.loads(line)
+                    rows[_case_id(row)] = row
                 except ValueError:
-                    continue  # a line cut short by a kill
-                rows[row["case_id"]] = row
+                    self.damaged.append(number)
         return list(rows.values())
 
     def done_ids(self) -> set[str]:
         return {row["case_id"] for row in self.rows()}
 
     def append(self, row: dict[str, Any]) -> None:
-        """Record one finished case (flushed to the operating system at once)."""
-        if self._journal is None:
-            self.path.mkdir(parents=True, exist_ok=True)
-            path = self.path / JOURNAL
-            cut = path.exists() and path.stat().st_size > 0 and not path.read_bytes().endswith(b"\n")
-            self._journal = open(path, "a", encoding="utf-8")  # noqa: SIM115 - kept open across cases, closed by close()
-            if cut:  # a line cut short by a kill: end it, so that the next row starts a line of its own
-                self._journal.write("\n")
-        self._journal.write(json.dumps(row, allow_nan=False) + "\n")
-        self._journal.flush()
+        """Record one finished case (flushed to the operating system at once).  A write that fails (a full disk)
+        is an :class:`~moose.files.OutputError` saying what the journal holds."""
+        try:
+            if self._journal is None:
+                self.path.mkdir(parents=True, exist_ok=True)
+                path = self.path / JOURNAL
+                cut = path.exists() and path.stat().st_size > 0 and not path.read_bytes().endswith(b"\n")
+                self._journal = open(path, "a", encoding="utf-8")  # noqa: SIM115 - kept open across cases, closed by close()
+                if cut:  # a line cut short by a kill: end it, so that the next row starts a line of its own
+                    self._journal.write("\n")
+            self._journal.write(json.dumps(row, allow_nan=False) + "\n")
+            self._journal.flush()
+        except OSError as exc:
+            raise OutputError(f"-o {str(self.path)!r}: case {row.get('case_id')} cannot be recorded "
+                              f"({exc.strerror or exc}); the cases recorded before it are kept in {JOURNAL}: "
+                              f"make room, then continue with --resume -o {str(self.path)!r}") from None
 
     def close(self) -> None:
+        """Close the journal; what a failed write left unwritten is not recorded (its case runs again)."""
         if self._journal is not None:
-            self._journal.close()
-            self._journal = None
+            journal, self._journal = self._journal, None
+            try:
+                journal.close()
+            except OSError:  # the buffered rest of a failed write: that case is not recorded
+                pass
 
     def write_results(self) -> Path:
         """results.parquet from the journal (atomically replaced)."""
@@ -176,6 +210,13 @@ class RunFolder:
         pq.write_table(table, tmp)
         os.replace(tmp, target)
         return target
+
+
+def _case_id(row: Any) -> str:
+    """The case id of a journal row (ValueError when ``row`` is not one)."""
+    if not isinstance(row, dict) or not isinstance(row.get("case_id"), str):
+        raise ValueError("not a row of a case")
+    return row["case_id"]
 
 
 def _column_order(rows: Iterable[dict[str, Any]]) -> list[str]:
