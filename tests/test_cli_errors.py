@@ -352,6 +352,19 @@ def test_a_service_that_is_not_dask_is_refused(tmp_path: Path, capsys: pytest.Ca
     assert not (tmp_path / "s").exists()
 
 
+@pytest.mark.parametrize("args, words", [
+    (["sweep", "--speed", "5", "--tau", "2", "--nu", "0.5", "-o", "/proc/moose-sweep"],
+     "-o '/proc/moose-sweep' cannot be written"),
+    (["bag", "view", str(Path(__file__).resolve().parents[1] / "bags" / "paper_v5_tau3_combined"),
+      "-o", "/proc/moose-view.png"], "-o '/proc/moose-view.png' cannot be written"),
+    (["can", "dump", "--interface", "socketcan", "--channel", "moose-nonexist0"],
+     "--interface socketcan --channel 'moose-nonexist0': the bus cannot be opened"),
+])
+def test_unusable_outputs_and_devices_are_errors_not_tracebacks(capsys: pytest.CaptureFixture[str], args: list[str],
+                                                                 words: str) -> None:
+    refused(here(capsys, *args), "moose: error: ", words)
+
+
 def _fifo_unblocker(path: Path, after: float) -> threading.Thread:
     """Open the FIFO for writing after ``after`` s and close it: a reader blocked on it (main) gets end of file."""
     def unblock() -> None:
@@ -394,3 +407,19 @@ def test_a_config_that_is_no_text_file_is_refused_before_it_is_read(tmp_path: Pa
     assert time.monotonic() - start < 4.0  # refused at once, not after reading
     refused(result, f"parameter file {str(path)!r}", words)
 
+
+@pytest.mark.can
+def test_the_can_bridge_refuses_to_start_without_its_bus() -> None:
+    """The probe: ``moose node can_bridge`` on a socketcan channel that does not exist printed "started" and
+    nothing else (re-opening every 2 s, the graph none the wiser)."""
+    from moose.params import ParamError
+    from moose_ros.nodes.can_bridge import CanBridge
+    from moose_ros.runtime import DdsNode
+
+    node = DdsNode("can_bridge", overrides={"can_interface": "socketcan", "can_channel": "moose-nonexist0"})
+    try:
+        with pytest.raises(ParamError, match=r"can_interface 'socketcan', can_channel 'moose-nonexist0': the bus "
+                                             r"cannot be opened \(open failed: .+\); the bridge does not start"):
+            CanBridge(node)
+    finally:
+        node.shutdown()

@@ -123,6 +123,11 @@ class BridgeRunner:
         self._reported_late = 0
         self.link.ensure_open(clock())  # a failure is reported and retried after the back-off
 
+    @property
+    def open_error(self) -> Optional[str]:
+        """Why the bus is closed (its last open or I/O failure), ``None`` while it is open."""
+        return None if self.link.bus is not None else self.core.health.last_error or "closed"
+
     # -- the node's calls -----------------------------------------------------------------
 
     def start(self) -> None:

@@ -28,13 +28,19 @@ def add_subparser(subparsers: Any) -> None:
 
 
 def cmd_can(args: argparse.Namespace) -> int:
+    import can
+
     from ..canbus.bus import DEFAULT_GROUP, open_bus
     from ..canbus.tools import dump, replay
 
+    channel = args.channel or DEFAULT_GROUP
     try:
-        bus = open_bus(args.interface, args.channel or DEFAULT_GROUP, port=args.port)
+        bus = open_bus(args.interface, channel, port=args.port)
     except ValueError as exc:
         raise ParamError(str(exc)) from None
+    except (can.CanError, OSError) as exc:  # no such device, no SocketCAN in this kernel, the port taken
+        raise ParamError(f"--interface {args.interface} --channel {channel!r}: the bus cannot be opened: "
+                         f"{exc}") from None
     try:
         if args.can_command == "dump":
             dump(bus, sys.stdout, count=args.count, duration=args.duration)

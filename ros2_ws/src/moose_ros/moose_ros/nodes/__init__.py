@@ -79,7 +79,11 @@ def run(name: str, argv: Sequence[str] = ()) -> int:
 
     signal.signal(signal.SIGTERM, terminate)
     watch_parent(_parent_gone)
-    node = cls(rt)
+    try:
+        node = cls(rt)
+    except BaseException:  # refused to start (ParamError: the CAN bridge without its bus): leave the domain
+        rt.shutdown()
+        raise
     node.publish_diagnostics()  # announce: the simulator starts the clock when every node has
     rt.log_info(f"{name} started (DDS discovery {rt.describe_discovery()})")
     try:

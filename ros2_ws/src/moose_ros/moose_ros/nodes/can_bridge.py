@@ -4,7 +4,9 @@ A thin shell around :class:`moose.canbus.runner.BridgeRunner`: the runner owns t
 guard (the vehicle's limits, the minimum-risk maneuver when commands stop), a dedicated command sender
 on the monotonic clock and a bounded receive path; this node forwards commands into it, publishes the
 sensor samples it decodes on the same topics the simulator uses (the graph cannot tell the difference)
-and its diagnostics on /diagnostics.  With simulated time (``moose launch can``) the runner takes the
+and its diagnostics on /diagnostics.  A bus that cannot be opened at start is an error (the node does not
+start); one that fails later is re-opened after the back-off of :mod:`moose.canbus.health`, and says so on
+/diagnostics meanwhile.  With simulated time (``moose launch can``) the runner takes the
 node's clock and the command frames go out from the node's 10 ms timer instead of the sender thread.
 """
 from __future__ import annotations
@@ -15,6 +17,7 @@ from typing import Any, Optional
 from moose.canbus.bus import BusParams
 from moose.canbus.runner import BridgeParams, BridgeRunner
 from moose.canbus.safety import Command, GuardParams
+from moose.params import ParamError
 from moose.signals import ActuatorCommand
 
 from ..graph import ACTUATOR_COMMAND
@@ -38,6 +41,11 @@ class CanBridge(GraphNode):
                                                          maneuver=self.config.minimum_risk), bus=bus)
         self.simulated = bool(getattr(rt, "use_sim_time", False))
         self.runner = BridgeRunner(params, log=p.can_log, clock=rt.now if self.simulated else time.monotonic)
+        if self.runner.open_error is not None:  # at start: a bridge without its bus refuses to start
+            why = self.runner.open_error
+            self.runner.close()
+            raise ParamError(f"can_interface {bus.interface!r}, can_channel {bus.channel!r}: the bus cannot be "
+                             f"opened ({why}); the bridge does not start without its bus")
         self.pub = sensor_publishers(rt, rt.now())
         self.subscribe(ACTUATOR_COMMAND, self.on_command)
         rt.timer(COMMAND_PERIOD, self.tick)
