@@ -304,9 +304,3 @@ def compensated_input(inp: PlannerInput, t: float, schedule: AccelSchedule) -> P
         threat = dataclasses.replace(threat, t=t, tau=time_to_collision(threat.obstacle.x_min - estimate.x,
                                                                          estimate.vx))
     return dataclasses.replace(inp, t=t, estimate=estimate, threat=threat)
-
-
-def latencies(timing: TimingParams) -> tuple[float, float]:
-    """The prediction horizons beyond the estimate's age: (planners, FBL) = (d_p + d_c, d_c)."""
-    return timing.planning_delay_s + timing.command_delay_s, timing.command_delay_s
-
