@@ -21,6 +21,7 @@ refuses to run otherwise."""
 from __future__ import annotations
 
 import contextlib
+import copy
 import itertools
 import os
 import time
@@ -49,6 +50,10 @@ def _environment(variables: dict[str, str]) -> Iterator[None]:
             else:
                 os.environ[key] = value
 
+
+READ_ONLY_REASON = "read once when the node starts: restart the node to change it"
+"""Why every parameter of an rclpy node is read-only (its descriptor's ``additional_constraints``, the reason a
+refused ``set_parameters`` gives)."""
 
 MAX_TAKE = 64
 """Messages taken from one subscription per executor turn at most, as the DDS executor takes at most
@@ -96,6 +101,8 @@ class RclpyNode(NodeBase):
         for dotted, parameter in self.node.get_parameters_by_prefix("").items():
             set_dotted(self._params, dotted, parameter.value)
         self.use_sim_time = bool(self.node.get_parameter("use_sim_time").value)
+        self._declaring = False
+        self._freeze_parameters()
         if self.use_sim_time:  # rclpy's time source reads /clock with this QoS (as the DDS backend's reader)
             self._track("subscription", CLOCK_TOPIC, CLOCK_TYPE, QOS_CLOCK_READER)
         self._executor = SingleThreadedExecutor()
@@ -105,6 +112,29 @@ class RclpyNode(NodeBase):
         self._sequence = itertools.count()
         self._worked = False
         self._condition = lambda: self._worked  # one object: rclpy compares the wait's arguments
+
+    def _freeze_parameters(self) -> None:
+        """Make every parameter read-only (its descriptor, as ``ros2 param describe`` shows it) and refuse any
+        later change with :data:`READ_ONLY_REASON`: the node read its parameters once, and one set at runtime would
+        be reported by ``get_parameters`` but not used (``simulation.planner`` on ``weight_fbl``), or would switch
+        what the node runs on under it (``use_sim_time``: its clock jumps to wall time)."""
+        for name in self.node.get_parameters_by_prefix(""):
+            descriptor = copy.copy(self.node.describe_parameter(name))
+            if not descriptor.read_only:
+                descriptor.read_only = True
+                descriptor.additional_constraints = READ_ONLY_REASON
+                self.node.set_descriptor(name, descriptor)
+        self.node.add_on_set_parameters_callback(self._refuse_change)
+
+    def _refuse_change(self, parameters: list[Any]) -> Any:
+        """The set-parameters callback: a declaration of this node's own (:meth:`declare_parameter`) passes, any
+        other change is refused with the reason."""
+        from rcl_interfaces.msg import SetParametersResult
+
+        if self._declaring:
+            return SetParametersResult(successful=True)
+        names = ", ".join(p.name for p in parameters)
+        return SetParametersResult(successful=False, reason=f"{names}: {READ_ONLY_REASON}")
 
     def _check_confinement(self, before: Optional[dict[str, tuple[str, int]]], profile: Optional[str]) -> str:
         """With a loopback ``profile`` applied on Fast DDS: that every UDP socket opened since ``before`` (this
@@ -177,12 +207,18 @@ class RclpyNode(NodeBase):
         return Handle(timer.cancel)
 
     def declare_parameter(self, name: str, default: Any = None) -> Any:
+        from rcl_interfaces.msg import ParameterDescriptor
+
         value = super().declare_parameter(name, default)
-        if value is not None and not self.node.has_parameter(name):  # visible to `ros2 param`
+        if value is not None and not self.node.has_parameter(name):  # visible to `ros2 param`, read-only
+            self._declaring = True
             try:
-                self.node.declare_parameter(name, value)
+                self.node.declare_parameter(name, value, ParameterDescriptor(
+                    read_only=True, additional_constraints=READ_ONLY_REASON))
             except Exception as exc:  # noqa: BLE001 - rclpy's parameter exceptions have no common base
                 raise ParamError(f"{self.name}.{name} = {value!r} cannot be declared: {exc}") from None
+            finally:
+                self._declaring = False
         return value
 
     def node_names(self) -> list[tuple[str, str]]:
