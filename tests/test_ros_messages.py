@@ -73,6 +73,26 @@ def test_type_names_follow_rmw_cyclonedds() -> None:
     assert message_class("moose_msgs/msg/PlannerOutput").STATUS_OVER_BUDGET == 3
 
 
+def test_every_plan_status_has_one_code_on_the_wire_defined_by_the_message() -> None:
+    """The STATUS_* constants of PlannerOutput.msg are the one definition: every PlanStatus has one, the codes are
+    the message class's, and each round-trips (``barrier_violated`` included)."""
+    from types import SimpleNamespace
+    from typing import get_args
+
+    from moose.signals import PlanResult, PlanStatus
+    from moose_ros import convert as cv
+
+    codes = cv.status_codes()
+    cls = message_class("moose_msgs/msg/PlannerOutput")
+    assert set(codes) == set(get_args(PlanStatus)) and len(set(codes.values())) == len(codes)
+    assert codes == {name: getattr(cls, f"STATUS_{name.upper()}") for name in get_args(PlanStatus)}
+    assert codes["barrier_violated"] == cls.STATUS_BARRIER_VIOLATED == 6
+    node = SimpleNamespace(make=make)
+    for name in get_args(PlanStatus):
+        plan = PlanResult(np.zeros((3, 2)), name, 1, 0.0, 1.0, np.zeros((4, 4)))
+        assert cv.plan_from_msg(cv.plan_to_msg(node, 0.0, "mpc", plan, True)).status == name
+
+
 def test_unknown_type_is_a_clear_error() -> None:
     with pytest.raises(KeyError, match="moose_msgs/msg/Nope"):
         make("moose_msgs/msg/Nope")

@@ -234,8 +234,9 @@ def test_a_solver_slow_in_wall_time_changes_nothing_in_lockstep() -> None:
 
 IDEAL_TRACES = {
     # sha256 of every trace column (little-endian float64), 3 s after appearance, seed 0, recorded on main at eafd7a4
-    # before the timing model existed; a deliberate change of the physics re-pins them and says why
-    (EXTREME, "combined"): "f917deaab77310dd98f47d273b9c690287200582cbc35dd3079b5e26654678d8",
+    # before the timing model existed; a deliberate change of the physics re-pins them and says why.
+    # Re-pinned (issue 24): the MPC's plans through y_safe are the paper's "fails to provide a solution" and weigh 0
+    (EXTREME, "combined"): "414701ae8a565c29ae2c2ccbdc8385dcdab313d07a1b9f0f1480515706677f7d",
     ("paper_v5_tau3", "mpc"): "685103ad9629240bc8ba7e87644bc915e39841733eb61ff4b43981e92efe8487",
 }
 

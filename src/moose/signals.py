@@ -17,13 +17,17 @@ from numpy.typing import ArrayLike
 
 from .params import ParamError
 
-PlanStatus = Literal["converged", "capped", "failed", "over_budget", "ok", "idle"]
+PlanStatus = Literal["converged", "capped", "failed", "over_budget", "ok", "idle", "barrier_violated"]
 """Outcome of one planning step.
 
 MPC: ``converged`` (tolerances met), ``capped`` (iteration/evaluation cap hit,
 best iterate returned), ``failed`` (solver error or non-finite result),
-``over_budget`` (wall time above the planning budget).  MSF: ``ok``.
-``idle``: no obstacle, lane keeping only.
+``over_budget`` (wall time above the planning budget), ``barrier_violated``
+(converged or capped, but the predicted path crosses the barrier y_safe of
+eq. (ysafe) before the zone's far edge: the paper's "fails to provide a
+solution").  MSF: ``ok``.  ``idle``: no obstacle, lane keeping only.
+The codes on the wire are the ``STATUS_*`` constants of moose_msgs'
+PlannerOutput, one per name.
 """
 
 

@@ -15,7 +15,8 @@ and never lets it raise out of a callback.
 from __future__ import annotations
 
 import math
-from typing import Any, Callable, Optional, Sequence, Union
+from functools import lru_cache
+from typing import Any, Callable, Optional, Sequence, Union, cast, get_args
 
 import numpy as np
 
@@ -58,8 +59,30 @@ from .graph import (
     Topic,
 )
 
-STATUS_CODES: dict[PlanStatus, int] = {"converged": 0, "capped": 1, "failed": 2, "over_budget": 3, "ok": 4, "idle": 5}
-STATUS_NAMES = {code: name for name, code in STATUS_CODES.items()}
+
+@lru_cache(maxsize=1)
+def status_codes() -> dict[PlanStatus, int]:
+    """The wire code of each plan status: the ``STATUS_<NAME>`` constants of moose_msgs' ``PlannerOutput.msg``, the
+    single definition (``STATUS_BARRIER_VIOLATED`` is ``barrier_violated``).  A status of the core without a
+    constant, or a constant without a status, is an error here, not a message that cannot be sent."""
+    from rosbags.typesys import get_types_from_msg
+
+    from .interfaces import MSG_PACKAGE, msg_dir
+
+    name = f"{MSG_PACKAGE}/msg/PlannerOutput"
+    constants, _ = get_types_from_msg((msg_dir() / "PlannerOutput.msg").read_text(encoding="utf-8"), name)[name]
+    codes = {const[len("STATUS_"):].lower(): int(value) for const, _kind, value in constants
+             if const.startswith("STATUS_")}
+    if set(codes) != set(get_args(PlanStatus)):
+        raise RuntimeError(f"PlannerOutput.msg's STATUS_* constants {sorted(codes)} are not the plan statuses "
+                           f"{sorted(get_args(PlanStatus))} of moose.signals.PlanStatus")
+    return {cast(PlanStatus, status): code for status, code in codes.items()}
+
+
+@lru_cache(maxsize=1)
+def status_names() -> dict[int, PlanStatus]:
+    """:func:`status_codes` inverted: the plan status of each wire code."""
+    return {code: status for status, code in status_codes().items()}
 
 
 class InvalidMessage(ValueError):
@@ -201,7 +224,7 @@ def plan_to_msg(node: Any, t: float, planner: str, plan: PlanResult, with_threat
     """A planner's answer at ``t``; ``with_threat``: it was planned against a reported threat."""
     msg = node.make("moose_msgs/msg/PlannerOutput")
     stamp(msg, t)
-    msg.planner, msg.status, msg.iterations = planner, STATUS_CODES[plan.status], int(plan.iterations)
+    msg.planner, msg.status, msg.iterations = planner, status_codes()[plan.status], int(plan.iterations)
     msg.with_threat = bool(with_threat)
     msg.solve_time, msg.cost = float(plan.solve_time_s), float(plan.cost) if math.isfinite(plan.cost) else 1e300
     msg.accel_x, msg.accel_y = [float(v) for v in plan.accel[:, 0]], [float(v) for v in plan.accel[:, 1]]
@@ -214,9 +237,10 @@ def plan_from_msg(msg: Any) -> PlanResult:
     """A planner's answer: a known status, finite accelerations of equal length (at least one step), a finite
     predicted path (positions and velocities) of equal lengths, a finite non-negative solve time, a finite
     cost (1e300 and above: none)."""
-    if msg.status not in STATUS_NAMES:
+    names = status_names()
+    if msg.status not in names:
         raise InvalidMessage(f"PlannerOutput.status = {msg.status!r} is invalid: "
-                             f"expected one of {sorted(STATUS_NAMES)}")
+                             f"expected one of {sorted(names)}")
     ax = _finite_array("PlannerOutput", "accel_x", msg.accel_x)
     ay = _finite_array("PlannerOutput", "accel_y", msg.accel_y)
     _same_length("PlannerOutput", ("accel_x", ax), ("accel_y", ay))
@@ -231,7 +255,7 @@ def plan_from_msg(msg: Any) -> PlanResult:
         raise InvalidMessage(f"PlannerOutput.cost = {msg.cost!r} is invalid: expected a number (1e300: none)")
     predicted = np.column_stack([values for _, values in columns]) if columns[0][1].size else np.zeros((0, 4))
     cost = msg.cost if msg.cost < 1e299 else math.inf
-    return PlanResult(np.column_stack([ax, ay]), STATUS_NAMES[int(msg.status)], int(msg.iterations),
+    return PlanResult(np.column_stack([ax, ay]), names[int(msg.status)], int(msg.iterations),
                       msg.solve_time, cost, predicted)
 
 

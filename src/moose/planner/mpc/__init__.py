@@ -15,6 +15,7 @@ from . import newton, nlpsol, paper_sqp  # noqa: F401  (register the solvers)
 from .cost import (
     PARAMETERS,
     Problem,
+    barrier_gap,
     build_problem,
     epsilon,
     j_brake,
@@ -24,13 +25,14 @@ from .cost import (
     j_steer,
     past_obstacle,
     speed_floor,
+    violates_barrier,
     y_safe,
 )
 from .planner import MpcPlanner, keep_speed_non_negative
 from .solver import Solver, SolveResult, SolveStatus, create, register, registered
 
 __all__ = [
-    "MpcPlanner", "PARAMETERS", "Problem", "SolveResult", "SolveStatus", "Solver", "build_problem", "create",
-    "epsilon", "j_brake", "j_return", "j_safe", "j_stable", "j_steer", "keep_speed_non_negative",
-    "past_obstacle", "register", "registered", "speed_floor", "y_safe",
+    "MpcPlanner", "PARAMETERS", "Problem", "SolveResult", "SolveStatus", "Solver", "barrier_gap", "build_problem",
+    "create", "epsilon", "j_brake", "j_return", "j_safe", "j_stable", "j_steer", "keep_speed_non_negative",
+    "past_obstacle", "register", "registered", "speed_floor", "violates_barrier", "y_safe",
 ]

@@ -81,6 +81,28 @@ def y_safe(x_ego: Any, vX: Any, x_obs: Any, w: Any, eps: Any, v_reg: float = 0.5
     return _out(w * sigmoid((x_obs - x_ego - 4.0 * vX) / scale), x_ego, vX, x_obs, w, eps)
 
 
+def barrier_gap(predicted: np.ndarray, x_near: float, x_far: float, w: float, side: float, y_path: float,
+                eps: float, v_reg: float = 0.5) -> np.ndarray:
+    """d = ỹ − y_safe, eq. (ysafe), at the predicted steps k + 1 … k + N_p that have not passed the zone's far edge
+    (m; negative: the path is on the obstacle's side of the barrier).
+
+    ``predicted`` is a plan's (N_p + 1, 4) states [x, y, v_X, v_Y] (row 0 the measured state, not a prediction);
+    ỹ = side (y − y_path) and y_safe are the cost's own (:func:`y_safe` with ``x_near`` and the regularising
+    ``v_reg``), so a path the cost calls infeasible is one this calls infeasible.  Steps past ``x_far`` are left
+    out: there the obstacle is passed and the cost switches J_safe off (:func:`past_obstacle`)."""
+    steps = np.asarray(predicted, dtype=float)[1:]
+    ahead = steps[steps[:, 0] <= x_far]
+    w_pos = max(w, 1e-3)
+    return np.array([side * (y - y_path) - y_safe(x, vX, x_near, w_pos, eps, v_reg) for x, y, vX, _ in ahead.tolist()])
+
+
+def violates_barrier(gap: np.ndarray) -> bool:
+    """The paper's hand-over trigger: the plan's predicted path crosses y_safe (d < 0, :func:`barrier_gap`) at some
+    step of the horizon before the zone's far edge — the point where the printed J_safe = −log d has no value and
+    the paper's solver "fails to provide a solution" (Sec. IV)."""
+    return bool(np.any(gap < 0.0))
+
+
 def j_safe(y_tilde: Any, ysafe: Any, margin: float = 0.3, clearance: float | None = None) -> Any:
     """J_safe, eq. (jbarr), with the intended sign: the ego kept above y_safe.
 

@@ -4,7 +4,9 @@
 (:data:`moose.planner.mpc.cost.PARAMETERS`) and an initial guess, lets the configured solver
 (:mod:`moose.planner.mpc.solver`) minimise the cost of :mod:`moose.planner.mpc.cost`, and returns the plan in
 m/s² with its predicted states.  The returned plan is projected onto v_X ≥ 0 and is never
-costlier than its start.
+costlier than its start.  A plan whose predicted path crosses the barrier y_safe before the zone's far
+edge is reported ``barrier_violated`` (:func:`moose.planner.mpc.cost.violates_barrier`): the paper's solver
+"fails to provide a solution" there, and the weight function treats it so.
 """
 from __future__ import annotations
 
@@ -21,7 +23,7 @@ from ...signals import PlannerInput, PlanResult, PlanStatus
 from ...timing import over_budget
 from ..kinematics import kinematic_rollout
 from . import solver as solvers
-from .cost import P_VX, build_problem, epsilon, speed_floor
+from .cost import P_VX, barrier_gap, build_problem, epsilon, speed_floor, violates_barrier
 
 
 @lru_cache(maxsize=16)
@@ -148,12 +150,25 @@ class MpcPlanner:
                     f = self._solver.cost(solution.ravel(), p)
                 solution, cost = (guess, result.f_start) if result.f_start < f else (solution, f)
         elapsed = time.perf_counter() - start
-        if status != "failed" and over_budget(elapsed if self.compute_time_s is None else self.compute_time_s,
-                                              self.params.time_budget_s):
-            status = "over_budget"
         accel = solution * self.scale
         est = inp.estimate
         state = np.array([est.x, est.y, est.vX, est.vY], dtype=float)
         state[~np.isfinite(state)] = 0.0  # a failed plan on a non-finite estimate still predicts finite states
+        predicted = kinematic_rollout(state, accel, self.grid.t_s)
+        if status != "failed" and over_budget(elapsed if self.compute_time_s is None else self.compute_time_s,
+                                              self.params.time_budget_s):
+            status = "over_budget"  # late is no plan, whatever its path
+        elif status != "failed" and inp.threat is not None and violates_barrier(self.barrier_gap(inp, predicted)):
+            status = "barrier_violated"
         return PlanResult(accel=accel, status=status, iterations=iterations, solve_time_s=elapsed, cost=cost,
-                          predicted=kinematic_rollout(state, accel, self.grid.t_s))
+                          predicted=predicted)
+
+    def barrier_gap(self, inp: PlannerInput, predicted: np.ndarray) -> np.ndarray:
+        """d = ỹ − y_safe along ``predicted`` for the threat of ``inp`` (:func:`moose.planner.mpc.cost.barrier_gap`,
+        with this problem's ε and regularisation); empty without a threat."""
+        threat = inp.threat
+        if threat is None:
+            return np.zeros(0)
+        box = threat.obstacle
+        return barrier_gap(predicted, box.x_min, box.x_max, threat.w, float(threat.side), threat.y_path,
+                           epsilon(self.grid.mu), self.params.v_reg)

@@ -84,7 +84,7 @@ class PlannerNode(GraphNode):
         if result.solve_time_s > self.config.planning.t_s:  # the planning slot is over before the plan exists
             self.deadline_misses += 1
         self.values = {"status": result.status, "solve_ms": f"{result.solve_time_s * 1e3:.2f}"}
-        self.level = OK if result.status in ("converged", "capped", "ok", "idle") else WARN
+        self.level = OK if result.status in ("converged", "capped", "barrier_violated", "ok", "idle") else WARN
         self.pub(cv.plan_to_msg(self.rt, t, self.kind, result, self.threat is not None))
 
 
