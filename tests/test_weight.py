@@ -1,6 +1,7 @@
 """Weight function: bounds, monotonic factors, failure handling, convex blend, filter, shift."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -33,9 +34,10 @@ def threat(tau: float = 3.0, nu: float = 0.3) -> Threat:
 
 def test_status_factor() -> None:
     f = wf()
-    w = {s: f.weight(plan(0.5, s), threat(), EST) for s in ("converged", "capped", "failed", "over_budget", "ok")}
+    w = {s: f.weight(plan(0.5, s), threat(), EST)
+         for s in ("converged", "capped", "failed", "over_budget", "ok", "barrier_violated")}
     assert w["converged"] > 0.9 and w["capped"] == pytest.approx(0.7 * w["converged"])
-    assert w["failed"] == w["over_budget"] == w["ok"] == 0.0
+    assert w["failed"] == w["over_budget"] == w["ok"] == w["barrier_violated"] == 0.0
     nan = PlanResult(np.full((10, 2), np.nan), "converged", 3, 1e-3, 1.0, np.zeros((11, 4)))
     assert f.weight(nan, threat(), EST) == 0.0
 
@@ -111,9 +113,74 @@ def test_next_initial_guess_shifts_by_one_step() -> None:
     assert guess.shape == accel.shape
 
 
+def test_a_plan_through_the_barrier_is_weighted_by_its_own_factor() -> None:
+    """Sec. IV: a solution the MPC "fails to provide" gives the MSF planner the weight; ``barrier_violated`` (the plan
+    crosses y_safe) counts as that with ``barrier_violated_factor`` (0 by default: all of it to the MSF)."""
+    converged = wf().weight(plan(0.5), threat(), EST)
+    assert wf().weight(plan(0.5, "barrier_violated"), threat(), EST) == 0.0
+    assert wf(barrier_violated_factor=0.4).weight(plan(0.5, "barrier_violated"), threat(), EST) == pytest.approx(
+        0.4 * converged)
+    f = wf()
+    blend = f.blend(plan(0.5, "barrier_violated"), plan(-1.0, "ok"), threat(), EST)
+    assert blend.weight_mpc == 0.0 and np.all(blend.accel[:, 1] == -1.0)
+
+
+def test_the_first_step_is_read_as_rho_reading_says() -> None:
+    """``fbl``: the FBL's δ* for the first acceleration at the current estimate (from straight running the front axle
+    alone carries the force, so above (l_r / L) μ g = 3.3 m/s² at μ = 0.8 it needs the steering limit);
+    ``kinematic``: L a_⊥ / v², as for the later steps."""
+    first_only = plan(4.0)
+    first_only.accel[1:] = 0.0
+    assert wf(rho_reading="fbl", n_rho=1).steering_usage(first_only, EST) > 0.95  # the front tyre's peak slip
+    kinematic = VEHICLE.wheelbase * 4.0 / 7.0**2 / VEHICLE.delta_max
+    assert wf(rho_reading="kinematic", n_rho=1).steering_usage(first_only, EST) == pytest.approx(kinematic, rel=1e-12)
+    assert wf(rho_reading="kinematic", n_rho=3).steering_usage(first_only, EST) == pytest.approx(kinematic, rel=1e-12)
+    assert wf(rho_reading="kinematic").weight(first_only, threat(tau=50.0, nu=0.0), EST) > 0.9
+    assert wf(rho_reading="fbl").weight(first_only, threat(tau=50.0, nu=0.0), EST) < 0.1
+
+
+def test_tau_and_nu_are_read_as_nu_reading_says() -> None:
+    """The same obstacle first at τ = 3 s, ν = 0.3 (detection), then at τ = 0.5 s, ν = 3 (the car is near it):
+    ``current`` sees the latter, ``at_detection`` the former, ``remaining`` ν scaled by the displacement still
+    needed (w − ỹ) / w, with T at the τ of detection."""
+    p = WeightParams()
+    detection, near = threat(tau=3.0, nu=0.3), threat(tau=0.5, nu=3.0)
+
+    def reading(name: str, y: float) -> tuple[float, float]:
+        f = wf(nu_reading=name)
+        f.weight(plan(0.5), detection, EST)
+        return f.threat_reading(near, StateEstimate(0.0, 14.0, y, 0.0, 7.0, 0.0, 0.0, 0.0))
+
+    assert reading("current", 1.5) == (0.5, 3.0)
+    assert reading("at_detection", 1.5) == (3.0, 0.3)
+    assert reading("remaining", 1.5) == (3.0, pytest.approx(3.0 * 0.5 / 2.0))  # w = 2, ỹ = 1.5: a quarter left
+    assert reading("remaining", 2.5) == (3.0, 0.0)  # beyond w: nothing left to do
+    mirrored = Threat(0.0, Obstacle(20.0, 22.0, -2.0, 2.0), 0.5, 2.0, 3.0, -1, 0.0)
+    f = wf(nu_reading="remaining")
+    f.weight(plan(0.5), dataclasses.replace(mirrored, tau=3.0, nu=0.3), EST)
+    assert f.threat_reading(mirrored, StateEstimate(0.0, 14.0, -1.5, 0.0, 7.0, 0.0, 0.0, 0.0))[1] == pytest.approx(
+        0.75)  # ỹ is the offset toward the evasion side
+    # the weight uses the reading: near the obstacle only at_detection and remaining leave the MPC a share
+    for name, share in (("current", False), ("at_detection", True), ("remaining", True)):
+        f = wf(nu_reading=name)
+        f.weight(plan(0.5), detection, EST)
+        w = f.weight(plan(0.5), near, StateEstimate(0.0, 14.0, 2.5, 0.0, 7.0, 0.0, 0.0, 0.0))
+        assert (w > 0.5) == share, name
+    # a new obstacle is a new detection; reset forgets it
+    f = wf(nu_reading="at_detection")
+    f.weight(plan(0.5), detection, EST)
+    other = Threat(0.0, Obstacle(40.0, 42.0, -2.0, 2.0), 2.0, 2.0, 0.6, 1, 0.0)
+    f.weight(plan(0.5), other, EST)
+    assert f.threat_reading(dataclasses.replace(other, tau=0.1, nu=5.0), EST) == (2.0, 0.6)
+    f.reset()
+    assert f.threat_reading(near, EST) == (0.5, 3.0)
+    assert p.nu_reading == "current" and p.rho_reading == "fbl"
+
+
 @pytest.mark.parametrize("field, value", [("rho_0", -1.0), ("tau_slope", 0.0), ("capped_factor", 1.5),
-                                          ("smoothing", 0.0), ("n_rho", 0)])
-def test_bad_parameters_name_the_field(field: str, value: float) -> None:
+                                          ("smoothing", 0.0), ("n_rho", 0), ("barrier_violated_factor", -0.1),
+                                          ("rho_reading", "steady"), ("nu_reading", "latched")])
+def test_bad_parameters_name_the_field(field: str, value: object) -> None:
     with pytest.raises(ParamError, match=field):
         WeightParams(**{field: value})
 

@@ -219,12 +219,33 @@ class MsfParams:
         check("return_share", self.return_share, lambda v: 0.0 < v <= 1.0, "a share in (0, 1]")
 
 
+RhoReading = Literal["fbl", "kinematic"]
+"""How the weight function reads the steering the MPC's first acceleration needs (ρ, docs/design.md, "Weight
+function"): ``fbl``, the FBL's δ* at the current estimate (the front axle alone carries the lateral force until
+yaw builds); ``kinematic``, L a_⊥ / v², the steering of a car already turning (as for the later steps)."""
+RHO_READINGS: tuple[RhoReading, ...] = get_args(RhoReading)
+
+NuReading = Literal["current", "at_detection", "remaining"]
+"""Which threat the factors T(τ) and N(ν) see: ``current``, the detector's τ and ν now (w latched at detection);
+``at_detection``, τ and ν as the obstacle was detected; ``remaining``, ν of the lateral displacement still needed
+(w − ỹ) over y_max of the time left, with T at the τ of detection (the time left is in that ν)."""
+NU_READINGS: tuple[NuReading, ...] = get_args(NuReading)
+
+
 @dataclasses.dataclass(frozen=True)
 class WeightParams:
-    """Thresholds (where a factor is ½) and slopes of the weight function."""
+    """Thresholds (where a factor is ½) and slopes of the weight function, and its readings of what the paper
+    leaves open."""
 
     capped_factor: float = 0.7
     """S for an iteration-capped MPC solution."""
+    barrier_violated_factor: float = 0.0
+    """S for a plan whose predicted path crosses the barrier y_safe (status ``barrier_violated``): the paper's
+    "fails to provide a solution" gives the MSF planner the weight."""
+    rho_reading: RhoReading = "fbl"
+    """How ρ reads the steering of the MPC's first acceleration (:data:`RhoReading`)."""
+    nu_reading: NuReading = "current"
+    """Which τ and ν the factors T and N see (:data:`NuReading`)."""
     rho_0: float = 0.85
     """Steering-limit usage ρ at which L = ½."""
     rho_slope: float = 0.05
@@ -242,6 +263,9 @@ class WeightParams:
 
     def __post_init__(self) -> None:
         check("capped_factor", self.capped_factor, unit_interval, "a factor in [0, 1]")
+        check("barrier_violated_factor", self.barrier_violated_factor, unit_interval, "a factor in [0, 1]")
+        check("rho_reading", self.rho_reading, lambda v: v in RHO_READINGS, " or ".join(RHO_READINGS))
+        check("nu_reading", self.nu_reading, lambda v: v in NU_READINGS, ", ".join(NU_READINGS))
         check("smoothing", self.smoothing, lambda v: 0.0 < v <= 1.0, "a share in (0, 1]")
         for name in ("rho_0", "rho_slope", "tau_0", "tau_slope", "nu_0", "nu_slope"):
             check(name, getattr(self, name), positive, "a positive number")

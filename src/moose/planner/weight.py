@@ -11,14 +11,24 @@ factors in [0, 1]:
     L(ρ) = σ((ρ₀ − ρ)/s_ρ),  T(τ) = σ((τ − τ₀)/s_τ),  N(ν) = σ((ν₀ − ν)/s_ν),
 
 * S = 1 for a converged solve, ``capped_factor`` for an iteration-capped one,
+  ``barrier_violated_factor`` for a plan whose predicted path crosses y_safe
+  (status ``barrier_violated``: the paper's "fails to provide a solution"),
   0 for a failed or late (over budget) one or non-finite accelerations;
 * ρ = max_k |δ_k| / δ_max over the first ``n_rho`` steps of the MPC's plan:
-  δ_0 is the FBL's δ* for the MPC's first acceleration at the current estimate
-  (the paper's δ_MPC; its tyre inversion saturates at the peak slip, so ρ → 1
-  also flags friction-limited demands), δ_k (k ≥ 1) the kinematic steering
-  L a_⊥,k / v_k² for the acceleration normal to the MPC's predicted velocity;
+  δ_k (k ≥ 1) is the kinematic steering L a_⊥,k / v_k² for the acceleration
+  normal to the MPC's predicted velocity; δ_0 is read as ``rho_reading`` says:
+  ``fbl``, the FBL's δ* for the MPC's first acceleration at the current
+  estimate (the paper's δ_MPC; its tyre inversion saturates at the peak slip,
+  so ρ → 1 also flags friction-limited demands, and from straight running the
+  front axle alone carries the force: ρ = 1 above (l_r / L) μ g), or
+  ``kinematic``, the kinematic steering of the first acceleration too;
 * short τ and ν → 1 (little time, little steering reserve) shift the weight to
-  the MSF planner, the maneuver built for that case.
+  the MSF planner, the maneuver built for that case.  Which τ and ν
+  (``nu_reading``): ``current``, the detector's now; ``at_detection``, those of
+  the threat as first reported for this obstacle; ``remaining``,
+  ν_rem = ν (w − ỹ)⁺ / w — the displacement still needed over y_max of the time
+  left (ν = w / y_max(τ, v) now, ỹ the offset toward the evasion side) — with
+  T at the τ of detection, so that the time left is not counted twice.
 
 With no threat the weight is 0: outside an emergency the reference is the MSF
 planner's lane-keeping law (the MPC's barrier problem has nothing to avoid,
@@ -58,24 +68,35 @@ class WeightFunction:
         self._fbl = fbl
         """The configured FBL: ρ uses the δ* it computes for the MPC's first acceleration."""
         self._previous: Optional[float] = None
+        self._detected: Optional[Threat] = None
+        """The threat as first reported for the current obstacle (``nu_reading``: ``at_detection``, ``remaining``)."""
 
     def reset(self) -> None:
         self._previous = None
+        self._detected = None
 
     def status_factor(self, mpc: PlanResult) -> float:
-        """S: 1 converged, ``capped_factor`` capped, 0 failed, over budget, non-finite or anything else."""
+        """S: 1 converged, ``capped_factor`` capped, ``barrier_violated_factor`` barrier violated, 0 failed, over
+        budget, non-finite or anything else."""
         if not np.all(np.isfinite(mpc.accel)):
             return 0.0
         if mpc.status == "capped":
             return self.params.capped_factor
+        if mpc.status == "barrier_violated":
+            return self.params.barrier_violated_factor
         return STATUS_FACTOR.get(mpc.status, 0.0)
 
     def steering_usage(self, mpc: PlanResult, estimate: StateEstimate) -> float:
-        """ρ: the largest |δ| / δ_max the MPC's first ``n_rho`` accelerations need."""
+        """ρ: the largest |δ| / δ_max the MPC's first ``n_rho`` accelerations need (the first as ``rho_reading``
+        says)."""
         v = self.vehicle
-        rho = abs(self._fbl.steering(mpc.accel[0], estimate)) / v.delta_max
+        first = 1
+        if self.params.rho_reading == "fbl":
+            rho = abs(self._fbl.steering(mpc.accel[0], estimate)) / v.delta_max
+        else:
+            rho, first = 0.0, 0
         n = min(self.params.n_rho, len(mpc.accel), len(mpc.predicted))
-        for k in range(1, n):
+        for k in range(first, n):
             vX, vY = float(mpc.predicted[k, 2]), float(mpc.predicted[k, 3])
             speed = math.hypot(vX, vY)
             if not math.isfinite(speed):
@@ -85,15 +106,34 @@ class WeightFunction:
             rho = max(rho, delta / v.delta_max)
         return rho
 
+    def _latch(self, threat: Optional[Threat]) -> None:
+        """Remember the first threat of each obstacle (the detection)."""
+        if threat is not None and (self._detected is None or self._detected.obstacle != threat.obstacle):
+            self._detected = threat
+
+    def threat_reading(self, threat: Threat, estimate: StateEstimate) -> tuple[float, float]:
+        """(τ, ν) that T and N see, as ``nu_reading`` says (the threat of detection is latched per obstacle by
+        :meth:`weight`)."""
+        reading = self.params.nu_reading
+        if reading == "current":
+            return threat.tau, threat.nu
+        detected = self._detected if self._detected is not None else threat
+        if reading == "at_detection":
+            return detected.tau, detected.nu
+        needed = threat.w - threat.side * (estimate.y - threat.y_path)  # w − ỹ
+        return detected.tau, (threat.nu * needed / threat.w if needed > 0.0 and threat.w > 0.0 else 0.0)
+
     def weight(self, mpc: PlanResult, threat: Optional[Threat], estimate: StateEstimate) -> float:
         """Unfiltered w_MPC in [0, 1]."""
         p = self.params
+        self._latch(threat)
         status = self.status_factor(mpc)
         if threat is None or status == 0.0:
             return 0.0
+        tau, nu = self.threat_reading(threat, estimate)
         w = status * _sigma((p.rho_0 - self.steering_usage(mpc, estimate)) / p.rho_slope)
-        w *= _sigma((threat.tau - p.tau_0) / p.tau_slope) if not math.isnan(threat.tau) else 0.0
-        w *= _sigma((p.nu_0 - threat.nu) / p.nu_slope) if not math.isnan(threat.nu) else 0.0
+        w *= _sigma((tau - p.tau_0) / p.tau_slope) if not math.isnan(tau) else 0.0
+        w *= _sigma((p.nu_0 - nu) / p.nu_slope) if not math.isnan(nu) else 0.0
         return float(min(max(w, 0.0), 1.0))
 
     def blend(self, mpc: Optional[PlanResult], msf: PlanResult, threat: Optional[Threat],
@@ -101,6 +141,7 @@ class WeightFunction:
         """Filtered w_MPC and the row-wise convex combination of the two acceleration sequences.
 
         ``mpc`` None (no MPC plan in time) counts as a failed solve: weight 0 at once."""
+        self._latch(threat)
         w = self.weight(mpc, threat, estimate) if mpc is not None else 0.0
         if w > 0.0 and self._previous is not None:
             # a usable MPC solution's share changes gradually; a failed one drops out at once
