@@ -62,10 +62,12 @@ def planned(table: MaxSteeringTable, v: float, tau: float, nu: float) -> tuple[M
     return MsfPlanner(MsfParams(), GRID, table), Obstacle(v * tau, v * tau + 2.0, -w, w), w
 
 
+@pytest.mark.parametrize("profile", ["scurve", "nu_scaled"])
 @pytest.mark.parametrize("v, tau, nu", CASES)
-def test_clears_the_danger_zone_with_the_margin(table: MaxSteeringTable, v: float, tau: float, nu: float) -> None:
+def test_clears_the_danger_zone_with_the_margin(table: MaxSteeringTable, v: float, tau: float, nu: float,
+                                                profile: str) -> None:
     planner, zone, w = planned(table, v, tau, nu)
-    path, _ = closed_loop(table, v, zone)
+    path, _ = closed_loop(table, v, zone, params=MsfParams(profile=profile))
     inside = (path[:, 0] >= zone.x_min) & (path[:, 0] <= zone.x_max) & (path[:, 1] <= zone.y_max)
     assert not np.any(inside)  # never inside the danger zone (checked every 10 ms)
     # beside it: the margin beyond w whenever the full maneuver can give it
@@ -93,16 +95,82 @@ def test_the_s_curve_is_continuous_and_ends_straight(table: MaxSteeringTable, v:
     assert e.target >= w + MsfParams().margin - 1e-9 or e.s1 == pytest.approx(tau) or e.kappa == 1.0
 
 
+@pytest.mark.parametrize("profile", ["scurve", "nu_scaled"])
 @pytest.mark.parametrize("v, tau, nu", CASES)
-def test_the_kinematic_car_follows_the_s_curve(table: MaxSteeringTable, v: float, tau: float, nu: float) -> None:
+def test_the_kinematic_car_follows_the_s_curve(table: MaxSteeringTable, v: float, tau: float, nu: float,
+                                               profile: str) -> None:
     # on the planners' own model the feed-forward is exact: the car flies the reference
-    planner, zone, w = planned(table, v, tau, nu)
+    params = MsfParams(profile=profile)
+    _, zone, w = planned(table, v, tau, nu)
+    planner = MsfPlanner(params, GRID, table)
     e = planner.evasion(zone, 0.0, w, tau, v)
-    path, _ = closed_loop(table, v, zone)
+    path, _ = closed_loop(table, v, zone, params=params)
     t = 0.01 * np.arange(len(path))
     evading = t <= tau
     ref = np.array([planner.evasion_reference(u, e)[0] for u in t[evading]])
     assert np.max(np.abs(path[evading, 1] - ref)) < 0.05
+
+
+@pytest.mark.parametrize("v, tau, nu", CASES)
+def test_the_nu_scaled_evasion_is_nu_times_y_max_to_the_near_edge(table: MaxSteeringTable, v: float, tau: float,
+                                                                  nu: float) -> None:
+    """``nu_scaled``: ỹ_ref = κ y_max(s) with κ = (w + m) / y_max(τ) — eq. (nudef)'s ν of the target — so the
+    reference is beside the far edge, with the margin, at the near edge; then the counter-steer stops the lateral
+    motion, continuously in position, velocity and acceleration, and its acceleration is the largest of the
+    evasion: the steering's largest swing comes at the near edge and after it."""
+    planner = MsfPlanner(MsfParams(profile="nu_scaled"), GRID, table)
+    w = nu * table.reach(tau, v)
+    e = planner.evasion(Obstacle(v * tau, v * tau + 2.0, -w, w), 0.0, w, tau, v)
+    target = w + MsfParams().margin
+    assert e.kappa == pytest.approx(min(target / table.y_max(tau, v), 1.0))
+    early = np.linspace(0.0, e.s1, 25)
+    np.testing.assert_allclose([planner.evasion_reference(u, e)[0] for u in early], e.kappa * table.y_max(early, v),
+                               atol=1e-12)
+    if e.kappa < 1.0:
+        assert e.s1 == tau and planner.evasion_reference(tau, e)[0] == pytest.approx(target)
+    else:  # the full maneuver, on until it reaches the target (or its peak)
+        assert e.s1 >= tau and table.y_max(e.s1, v) >= target - 1e-6 or e.s1 == pytest.approx(
+            float(table.t[np.argmax(table.y_max(table.t, v))]), abs=0.01)
+    s = np.arange(0.0, e.s1 + 4.0, 0.001)
+    ref = np.array([planner.evasion_reference(u, e)[:2] for u in s])
+    accel = np.diff(ref[:, 1]) / 0.001
+    assert np.max(np.abs(np.diff(ref[:, 0]))) < 0.001 * 1.1 * np.max(np.abs(ref[:, 1])) + 1e-9
+    assert np.max(np.abs(np.diff(accel))) < 0.05 * GRID.a_y_max  # no jump: the steering swings, it cannot jump
+    assert np.all(np.diff(ref[:, 0]) >= -1e-12) and ref[-1, 1] == pytest.approx(0.0, abs=1e-9)
+    assert ref[-1, 0] == pytest.approx(e.target) and e.target >= target - 1e-9
+    before, after = s[:-1] <= e.s1, s[:-1] > e.s1
+    assert np.max(np.abs(accel[after])) >= np.max(np.abs(accel[before])) - 1e-6
+
+
+def test_counter_steer_ramps_holds_and_releases_to_a_stop() -> None:
+    from moose.planner.msf import counter_steer
+
+    stop = counter_steer(2.0, 1.5, 0.8, 3.0, 0.4, 0.3)  # swing 0.4 s to −3 m/s², hold, release over 0.3 s
+    (t0, a0), (t1, a1), (t2, a2), (t3, a3) = stop.knots
+    assert (t0, a0, t1, a1, a2, a3) == (0.0, 0.8, 0.4, -3.0, -3.0, 0.0) and t3 - t2 == pytest.approx(0.3)
+    p, v, a = stop.at(t3)
+    assert v == pytest.approx(0.0, abs=1e-12) and a == 0.0 and p == pytest.approx(stop.end)
+    # the velocity is the integral of the acceleration: v0 + areas of the trapezoids
+    assert 1.5 + 0.4 * (0.8 - 3.0) / 2 - 3.0 * (t2 - t1) - 3.0 * 0.3 / 2 == pytest.approx(0.0, abs=1e-12)
+    assert stop.at(t3 + 5.0)[:2] == pytest.approx((stop.end, 0.0))
+    slow = counter_steer(2.0, 0.2, 0.0, 3.0, 0.4, 0.3)  # too slow to hold: a softer counter-steer, no hold
+    assert len(slow.knots) == 4 and slow.knots[1][0] == slow.knots[2][0] and slow.at(slow.knots[-1][0])[1] == (
+        pytest.approx(0.0, abs=1e-12))
+    assert counter_steer(2.0, 0.0, -1.0, 3.0, 0.4, 0.3).end == 2.0  # at rest laterally: nothing to stop
+
+
+def test_arrival_at_the_near_edge_follows_the_speed_law() -> None:
+    """τ is the time to the near edge at the speed of detection; the MSF arrives when its own speed law takes it
+    there (the paper's third 6 m/s case: detected at 4.5 m/s with 6 m/s desired)."""
+    from moose.planner.msf import arrival_time
+
+    assert arrival_time(3.0, 6.0, 6.0, 0.5) == 3.0
+    t = arrival_time(3.0, 4.5, 6.0, 0.5)
+    x = 6.0 * t + (4.5 - 6.0) * (1.0 - math.exp(-0.5 * t)) / 0.5  # v(t) = v_des + (v0 − v_des) e^(−k t), integrated
+    assert x == pytest.approx(13.5, abs=1e-9) and 2.4 < t < 3.0
+    assert arrival_time(3.0, 6.0, 4.5, 0.5) > 3.0
+    assert arrival_time(3.0, 6.0, 0.0, 0.5) == math.inf  # stops 12 m on, 18 m short of the edge
+    assert arrival_time(math.inf, 6.0, 4.5, 0.5) == math.inf
 
 
 def test_scale_grows_with_the_threat(table: MaxSteeringTable) -> None:
@@ -207,8 +275,8 @@ def test_new_obstacle_restarts_the_maneuver(table: MaxSteeringTable) -> None:
     np.testing.assert_allclose(a1, a0, atol=1e-12)
 
 
-@pytest.mark.parametrize("field, value", [("margin", -0.1),
-                                          ("reach_fraction", 1.5), ("omega_track", 0.0), ("return_share", 1.5)])
-def test_bad_parameters_name_the_field(field: str, value: float) -> None:
+@pytest.mark.parametrize("field, value", [("margin", -0.1), ("reach_fraction", 1.5), ("omega_track", 0.0),
+                                          ("return_share", 1.5), ("profile", "sigmoid")])
+def test_bad_parameters_name_the_field(field: str, value: object) -> None:
     with pytest.raises(ParamError, match=field):
         MsfParams(**{field: value})

@@ -194,10 +194,19 @@ class MpcParams:
               "(an iteration evaluates the cost at most 1 + max_iter_ls times)")
 
 
+MsfProfile = Literal["scurve", "nu_scaled"]
+"""The MSF planner's evasion reference (docs/design.md, "MSF planner"): ``scurve``, the maximum steering maneuver
+scaled to arrive at w + m by the near edge, then mirrored (the counter-steer before the obstacle); ``nu_scaled``,
+ν y_max(t) with ν of the target w + m (eq. (nudef)), arriving there at τ, the counter-steer from the near edge on."""
+MSF_PROFILES: tuple[MsfProfile, ...] = get_args(MsfProfile)
+
+
 @dataclasses.dataclass(frozen=True)
 class MsfParams:
     """MSF planner parameters."""
 
+    profile: MsfProfile = "scurve"
+    """The evasion reference (:data:`MsfProfile`)."""
     margin: float = 0.5
     """Lateral margin m beyond the far edge (m): the S-curve's target is w + m."""
     reach_fraction: float = 1.0
@@ -214,6 +223,7 @@ class MsfParams:
     def __post_init__(self) -> None:
         for name in ("omega_track", "omega_lane", "k_speed"):
             check(name, getattr(self, name), positive, "a positive number")
+        check("profile", self.profile, lambda v: v in MSF_PROFILES, " or ".join(MSF_PROFILES))
         check("margin", self.margin, non_negative, "a non-negative distance (m)")
         check("reach_fraction", self.reach_fraction, lambda v: 0.0 < v <= 1.0, "a fraction in (0, 1]")
         check("return_share", self.return_share, lambda v: 0.0 < v <= 1.0, "a share in (0, 1]")

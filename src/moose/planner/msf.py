@@ -68,9 +68,78 @@ def _quintic(left: tuple[float, float, float], right: tuple[float, float, float]
     return position, slope / h
 
 
+def arrival_time(tau: float, v0: float, v_des: float, k_speed: float) -> float:
+    """When the car reaches the near edge, τ v₀ ahead at detection, with its speed following the MSF's law
+    dv/dt = k_v (v_des − v) from v₀ (s): τ itself when v₀ = v_des; shorter when the car speeds up (the paper's
+    4.5 m/s detection with a desired 6 m/s), longer when it slows; inf if it stops short of the edge."""
+    distance = tau * v0
+    if not (math.isfinite(distance) and distance > 0.0) or v0 == v_des:
+        return tau
+
+    def travelled(t: float) -> float:
+        return v_des * t + (v0 - v_des) * (1.0 - math.exp(-k_speed * t)) / k_speed
+
+    if v_des <= 0.0 and v0 / k_speed <= distance:
+        return math.inf
+    lo, hi = 0.0, tau
+    while travelled(hi) < distance:
+        lo, hi = hi, 2.0 * hi
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if travelled(mid) < distance else (lo, mid)
+    return hi
+
+
+@dataclasses.dataclass(frozen=True)
+class Ramps:
+    """A lateral motion whose acceleration is piecewise linear in time: from (``p0``, ``v0``) at u = 0 through the
+    (time, acceleration) ``knots`` (the first at u = 0), then 0 (the ``nu_scaled`` counter-steer)."""
+
+    p0: float
+    v0: float
+    knots: tuple[tuple[float, float], ...]
+
+    def at(self, u: float) -> tuple[float, float, float]:
+        """(position, velocity, acceleration) ``u`` seconds after the start (exact: cubic positions)."""
+        p, v = self.p0, self.v0
+        for (t0, a0), (t1, a1) in zip(self.knots, self.knots[1:]):
+            span = t1 - t0
+            du = min(max(u - t0, 0.0), span)
+            slope = (a1 - a0) / span if span > 0.0 else 0.0
+            p_end = p + v * du + 0.5 * a0 * du * du + slope * du ** 3 / 6.0
+            v_end = v + a0 * du + 0.5 * slope * du * du
+            if u <= t1:
+                return p_end, v_end, a0 + slope * du
+            p, v = p_end, v_end
+        last = self.knots[-1][0] if self.knots else 0.0
+        return p + v * max(u - last, 0.0), v, 0.0
+
+    @property
+    def end(self) -> float:
+        """The offset where the motion stops (m)."""
+        return self.at(self.knots[-1][0] if self.knots else 0.0)[0]
+
+
+def counter_steer(p1: float, v1: float, a1: float, a_brake: float, swing: float, release: float) -> Ramps:
+    """Stop a lateral motion (position ``p1``, velocity ``v1`` > 0, acceleration ``a1``) as a car can: the lateral
+    acceleration swings linearly from ``a1`` to −``a_brake`` over ``swing`` seconds (the steering from its lock
+    to the opposite), is held, and returns to 0 over ``release`` seconds (the steering back to straight), the
+    hold chosen so that the velocity ends at 0.  Too little velocity to hold for: a lower ``a_brake`` without a
+    hold; none at all (v1 ≤ 0): no counter-steer."""
+    if v1 <= 0.0:
+        return Ramps(p1, v1, ())
+    hold = (v1 + 0.5 * swing * (a1 - a_brake) - 0.5 * a_brake * release) / a_brake
+    if hold < 0.0:
+        hold, a_brake = 0.0, (v1 + 0.5 * swing * a1) / (0.5 * (swing + release))
+        if a_brake <= 0.0:  # the acceleration returning to 0 already stops it
+            return Ramps(p1, v1, ((0.0, a1), (-2.0 * v1 / a1, 0.0)))
+    return Ramps(p1, v1, ((0.0, a1), (swing, -a_brake), (swing + hold, -a_brake), (swing + hold + release, 0.0)))
+
+
 @dataclasses.dataclass(frozen=True)
 class Evasion:
-    """The S-curve latched at detection for one obstacle."""
+    """The evasion reference latched at detection for one obstacle: the S-curve (``stop`` None) or the ν-scaled
+    maneuver and its counter-steer."""
 
     obstacle: Obstacle
     t0: float
@@ -86,6 +155,8 @@ class Evasion:
     swing: float
     """Duration of the counter-steer transition (s): the steering's time from κ-lock to the opposite,
     2 κ δ_max / δ̇_max, centred on s₁ (:meth:`MsfPlanner.evasion_reference`)."""
+    stop: Optional[Ramps] = None
+    """``nu_scaled``: the counter-steer from s₁ on (time measured from s₁); None for the S-curve."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -121,11 +192,14 @@ class MsfPlanner:
 
     # -- the evasion S-curve -------------------------------------------------------------------------
     def evasion(self, obstacle: Obstacle, t0: float, w: float, tau: float, vx: float) -> Evasion:
-        """The S-curve for a threat of width ``w`` at time to collision ``tau``, at the speed ``vx``.
+        """The evasion (``params.profile``) for a threat of width ``w`` at time to collision ``tau``, at the
+        speed ``vx``.
 
         Its position at the near edge is that of the reference the car is given, the counter-steer's
         transition included (:meth:`evasion_reference`).
         """
+        if self.params.profile == "nu_scaled":
+            return self.nu_scaled_evasion(obstacle, t0, w, tau, vx)
         p, y = self.params, self.table.y_max
         target = w + p.margin
         v = max(vx, 0.0)
@@ -153,6 +227,33 @@ class MsfPlanner:
             s1 = hi
         return Evasion(obstacle, t0, v, 1.0, s1, 2.0 * float(y(s1, v)), swing)
 
+    def nu_scaled_evasion(self, obstacle: Obstacle, t0: float, w: float, tau: float, vx: float) -> Evasion:
+        """The ν-scaled evasion: ỹ_ref = κ y_max(s) with κ = W / y_max(τ) (eq. (nudef) for the target W = w + m,
+        at most 1), arriving at W at τ; then the counter-steer (:func:`counter_steer`) at the full maneuver's
+        peak lateral acceleration, so the steering's largest swing comes at and after the near edge.
+
+        The steer phase ends at s₁ = τ, at the peak of y_max if that comes first (ẏ_max = 0 there: nothing to
+        stop), and with κ = 1 (W beyond y_max(τ)) where the full maneuver reaches W, at the latest at its peak."""
+        table, y = self.table, self.table.y_max
+        target = w + self.params.margin
+        v = max(vx, 0.0)
+        profile = np.asarray(y(table.t, v))
+        peak = float(table.t[int(np.argmax(profile))])
+        s1 = min(max(tau, 0.0), peak)
+        reach = float(y(s1, v))
+        kappa = min(target / reach, 1.0) if reach > 1e-9 else 1.0
+        if kappa == 1.0 and reach < target and s1 < peak:
+            lo, hi = s1, peak  # y_max rises on [τ, peak]: the first time it reaches W, or its peak
+            if float(y(hi, v)) >= target:
+                for _ in range(30):
+                    mid = 0.5 * (lo + hi)
+                    lo, hi = (mid, hi) if float(y(mid, v)) < target else (lo, mid)
+            s1 = hi
+        stop = counter_steer(kappa * float(y(s1, v)), kappa * float(table.v_Y_max(s1, v)),
+                             kappa * float(table.a_Y_max(s1, v)), float(np.max(table.a_Y_max(table.t, v))),
+                             (kappa + 1.0) * table.t_lock, table.t_lock)
+        return Evasion(obstacle, t0, v, kappa, s1, stop.end, (kappa + 1.0) * table.t_lock, stop)
+
     def evasion_reference(self, s: float, e: Evasion) -> tuple[float, float, float]:
         """(ỹ_ref, ẏ_ref, mean ÿ_ref over the coming step) ``s`` seconds after detection.
 
@@ -176,6 +277,12 @@ class MsfPlanner:
             return e.target, 0.0, 0.0
 
         def position(u: float) -> tuple[float, float]:
+            if e.stop is not None:  # ν-scaled: the scaled maneuver, then the counter-steer
+                if u <= e.s1:
+                    p, v, _ = raw(u)
+                    return p, v
+                p, v, _ = e.stop.at(u - e.s1)
+                return p, v
             if half <= 0.0 or abs(u - e.s1) >= half:
                 p, v, _ = raw(u)
                 return p, v
@@ -206,7 +313,8 @@ class MsfPlanner:
         p, g, est, threat = self.params, self.grid, inp.estimate, inp.threat
         if threat is not None:
             if self._evasion is None or self._evasion.obstacle != threat.obstacle:
-                self._evasion = self.evasion(threat.obstacle, inp.t, threat.w, threat.tau, est.vx)
+                arrive = arrival_time(threat.tau, est.vx, inp.v_des, p.k_speed)
+                self._evasion = self.evasion(threat.obstacle, inp.t, threat.w, arrive, est.vx)
             self._return = None
             self._side, self._y_path = float(threat.side), threat.y_path
         elif self._evasion is not None:  # the threat has cleared: fly back to the lane
