@@ -150,6 +150,14 @@ def test_lag_compensation_beats_fusing_late_fixes_as_current(run: Run, naive: Ru
     assert compensated_rms < 0.1 * naive_rms
 
 
+def test_without_replay_a_late_fix_is_fused_on_arrival_as_if_current(run: Run, naive: Run) -> None:
+    """``replay_late_gps: false``: the filter of a car without a history, which fuses the stale fix as current — what
+    a history shorter than the lag does — and so carries the v·lag error the replay removes."""
+    off = double_lane_change(observer=ObserverParams(replay_late_gps=False))
+    np.testing.assert_allclose(off.est, naive.est, rtol=0.0, atol=1e-9)
+    assert np.max(np.abs(off.est[:, :2] - run.est[:, :2])) > 0.5 * V0 * LAG
+
+
 def test_late_fix_replay_equals_the_fix_delivered_on_time(run: Run) -> None:
     """Same seed, lag 0 (same noise draws): once a late fix is delivered both filters agree to round-off."""
     on_time = double_lane_change(sensors=SensorParams(gps_lag_s=0.0))

@@ -15,7 +15,8 @@ by ``v_low`` as in the plant.  Measurements:
   filter keeps a short history of snapshots and the samples since; a late
   fix restores the snapshot at its measurement time, is fused there, and the
   later samples are replayed (exact re-propagation; at 1 Hz this costs about
-  20 predict steps per fix).  A fix older than the history is fused on arrival.
+  20 predict steps per fix).  A fix older than the history is fused on arrival, and so is every fix
+  without ``replay_late_gps`` (as if it were current: the stale position a filter without a history uses).
 
 The lockstep loop hands the filter each tick's samples at once (:meth:`StateObserver.update_all`):
 the IMU and wheel-speed samples of one time are then fused in one compiled call that calls the two
@@ -265,7 +266,12 @@ class StateObserver:
         self._bound_mu()
 
     def _fuse_late_gps(self, fix: GpsSample) -> None:
-        """Fuse a fix at its measurement time and replay the samples delivered since."""
+        """Fuse a fix at its measurement time and replay the samples delivered since (without
+        ``replay_late_gps``: at its delivery, as if it were current)."""
+        if not self.params.replay_late_gps:
+            self._advance(fix.t)
+            self._gps_correct(fix)
+            return
         if fix.t_measured >= self._t:  # not older than the filter: predict to it and fuse
             self._advance(fix.t_measured)
             self._gps_correct(fix)

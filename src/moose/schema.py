@@ -331,6 +331,9 @@ class ObserverParams:
     r_gps_velocity: float = 0.05
     history_s: float = 1.5
     """How far back a late GPS fix can be fused (s)."""
+    replay_late_gps: bool = True
+    """Fuse a late GPS fix at its measurement time and replay the samples since (exact); False fuses it on
+    arrival as if it were current, as a filter without a history does (Observation 2 is measured both ways)."""
     estimate_mu: bool = False
     """Augment the state with μ (random walk, started at the planning μ) instead of trusting it."""
     q_mu: float = 0.02
