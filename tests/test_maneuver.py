@@ -38,7 +38,7 @@ def reference() -> tuple[np.ndarray, object]:
 # --- the paper ---------------------------------------------------------------------------------
 
 def test_paper_fit_reproduces_the_printed_nu() -> None:
-    # the transcribed fit gives the nu printed in Figs. 5-7 to their last digit (0.1998 is printed
+    # the transcribed fit gives the nu printed in Figs. 7-9 to their last digit (0.1998 is printed
     # 0.19 and 0.399 is printed 0.40, hence 0.011), with v_x first and t second
     for e in PAPER_EXPERIMENTS:
         assert e.w / paper_y_max_fit(e.vx, e.tau) == pytest.approx(e.nu, abs=0.011)

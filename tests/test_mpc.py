@@ -1,4 +1,4 @@
-"""MPC planner: cost terms against their formulas, Example emp:eta, receding-horizon behaviour,
+"""MPC planner: cost terms against their formulas, Example 2, receding-horizon behaviour,
 statuses, v_X ≥ 0 and mirror symmetry."""
 from __future__ import annotations
 
@@ -70,7 +70,7 @@ def test_y_safe_is_the_sigmoid_of_eq_ysafe() -> None:
     for x, v in ((0.0, 5.0), (8.0, 5.0), (12.0, 6.0), (20.0, 3.0)):
         reference = w / (1.0 + math.exp((x_obs - x - 4 * v) / (eps * math.sqrt(w * v * v))))
         assert y_safe(x, v, x_obs, w, eps, v_reg=1e-9) == pytest.approx(reference, rel=1e-9)
-    # half of w exactly 4 v_X before the obstacle (Fig. barrier), whatever the regularisation
+    # half of w exactly 4 v_X before the obstacle (Fig. 5), whatever the regularisation
     assert y_safe(x_obs - 4 * 5.0, 5.0, x_obs, w, eps) == pytest.approx(w / 2)
     # the tanh form does not overflow where exp would
     assert y_safe(-1e6, 5.0, x_obs, w, eps) == 0.0
@@ -176,7 +176,7 @@ def test_cost_is_eq_jcaldef_over_the_predicted_states(u: list[float], side: int,
     assert planner.cost(inp, uu) == pytest.approx(reference_cost(params, s0, uu, th, 6.0), rel=1e-8, abs=1e-8)
 
 
-# --- Example emp:eta ---------------------------------------------------------------------------
+# --- Example 2 (emp:eta) ---------------------------------------------------------------------------
 
 @pytest.mark.parametrize("eta", [EQUAL, (0.5, 0.25, 0.05, 0.2)])
 def test_example_eta_steers_at_the_bound_without_braking(eta: tuple[float, float, float, float]) -> None:
@@ -202,7 +202,7 @@ def test_example_eta_steers_at_the_bound_without_braking(eta: tuple[float, float
 # --- receding horizon --------------------------------------------------------------------------
 
 def test_relaxed_case_clears_the_zone_and_returns_to_the_lane() -> None:
-    """v = 5 m/s, zone 25–27 m ahead, w = 2 m, Example emp:eta's first weight set, every plan
+    """v = 5 m/s, zone 25–27 m ahead, w = 2 m, Example 2's first weight set, every plan
     solved to convergence (docs/design.md, "MPC": at the paper's caps the capped first plan
     decides between this manoeuvre and a crawl in front of the zone)."""
     th = threat(w=2.0, x_min=25.0)

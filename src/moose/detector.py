@@ -13,7 +13,7 @@ For the nearest danger zone ahead that lies in the ego path:
   differ by less than ``side_tie`` count as a tie and go left (+1), as in all
   the paper's tests, so estimation noise cannot flip the decision.
 * w: lateral distance from the ego path to the zone's far edge on the evasion
-  side (the ν printed in Figs. 5–7 use exactly this width), never negative.
+  side (the ν printed in Figs. 7–9 use exactly this width), never negative.
 * ν = w / y_max(τ, v̂_x), eq. (nudef); 0 when the car is not closing in (τ = ∞).
 
 A zone is in the ego path when ŷ lies within ``lateral_margin`` of its lateral

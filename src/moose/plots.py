@@ -1,4 +1,4 @@
-"""The paper-style result figure (Figs. 5–7): path, steering and speed against x."""
+"""The paper-style result figure (Figs. 7–9): path, steering and speed against x."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -20,7 +20,7 @@ OUTCOME_COLOUR = {"clear": "tab:green", "incomplete": "tab:gray", "stopped_short
 def plot_result(results: Sequence[SimulationResult], path: str | Path) -> Path:
     """Three panels: y–x path with the danger zone; δ_MPC and δ vs x; v_x,ref and v_x vs x.
 
-    Several results (e.g. ``combined`` and ``mpc`` on one scenario, as Fig. 8)
+    Several results (e.g. ``combined`` and ``mpc`` on one scenario, as Fig. 10)
     are overlaid; the obstacle of the first is drawn.  Each run's verdict (:func:`moose.verdict.judge`,
     from its true state) is written on the path panel, green when clear, red for a failure.
     """

@@ -1,7 +1,7 @@
 """Moose-test scenarios: the paper's experiments (Sec. VI) as validated files.
 
 A scenario puts the ego vehicle on a straight path (y = 0, heading 0) at the
-speed ``v_init``; a static obstacle's danger zone (the red boxes of Figs. 5–8,
+speed ``v_init``; a static obstacle's danger zone (the red boxes of Figs. 7–10,
 which bound the CoG) appears suddenly when the time to collision with its near
 edge, τ = (x_min − x) / v_x, reaches ``tau``.  The vehicle must stay inside the
 ``field`` (the plotted extent of the paper's result figures by default).

@@ -1,7 +1,7 @@
 """The MPC's optimisation problem: eqs. (skin), (ysafe), (costs), (jcaldef), (planmpc).
 
 The decision variables are the 2 N_p inputs ũ = [v̇_X, v̇_Y] over the horizon, normalised to
-[−1, 1] by (a_x_max, a_y_max) (eq. (utilde); Example emp:eta's normalisation); the predicted
+[−1, 1] by (a_x_max, a_y_max) (eq. (utilde); Example 2's normalisation); the predicted
 states are functions of them inside the cost (single shooting, as eq. (planmpc) states).  The
 problem is built once per parameter set (:func:`build_problem`) and is parametric in the state,
 v_des, the obstacle's extent, w, the evasion side, the ego path, ε (i.e. μ) and the input bounds
@@ -13,7 +13,7 @@ Choices where the paper is silent or inconsistent (docs/design.md, "MPC"):
   (forward Euler would give y(k+1) = y(k) whatever the input: the first predicted step could
   not react).
 * Barrier sign: the printed J_safe = −log(y_safe − y) keeps the ego *below* the
-  sigmoid, i.e. in the obstacle; Example emp:eta and Fig. barrier describe the ego
+  sigmoid, i.e. in the obstacle; Example 2 and Fig. 5 (the barrier) describe the ego
   kept above it.  We use the offset toward the evasion side ỹ = s (y − y_path)
   and d = ỹ − y_safe.
 * Barrier shape (:func:`j_safe`): −log d as printed (``barrier = "paper"``, the
