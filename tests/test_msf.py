@@ -19,6 +19,7 @@ VEHICLE = VehicleParams(mu=PAPER_FRICTION)
 GRID = Config(vehicle=VEHICLE).grid
 T_S = 0.2
 MSF = MsfParams()
+SCURVE = MsfParams(profile="scurve")
 
 
 @pytest.fixture(scope="module")
@@ -57,9 +58,10 @@ def closed_loop(table: MaxSteeringTable, v: float, zone: Obstacle, steps: int = 
 CASES = [(v, tau, nu) for v in (5.0, 6.0, 7.0) for tau in (1.4, 2.0, 3.0) for nu in (0.2, 0.5, 0.8)]
 
 
-def planned(table: MaxSteeringTable, v: float, tau: float, nu: float) -> tuple[MsfPlanner, Obstacle, float]:
+def planned(table: MaxSteeringTable, v: float, tau: float, nu: float,
+            params: MsfParams = SCURVE) -> tuple[MsfPlanner, Obstacle, float]:
     w = nu * table.reach(tau, v)  # eq. (nudef) solved for the width
-    return MsfPlanner(MsfParams(), GRID, table), Obstacle(v * tau, v * tau + 2.0, -w, w), w
+    return MsfPlanner(params, GRID, table), Obstacle(v * tau, v * tau + 2.0, -w, w), w
 
 
 @pytest.mark.parametrize("profile", ["scurve", "nu_scaled"])
@@ -174,7 +176,7 @@ def test_arrival_at_the_near_edge_follows_the_speed_law() -> None:
 
 
 def test_scale_grows_with_the_threat(table: MaxSteeringTable) -> None:
-    planner = MsfPlanner(MsfParams(), GRID, table)
+    planner = MsfPlanner(SCURVE, GRID, table)
     zone = Obstacle(20.0, 22.0, -1.0, 1.0)
     for v in (3.0, 5.0, 7.0, 10.0):
         for tau in (0.5, 1.4, 2.0, 3.0, 5.0):
@@ -207,7 +209,7 @@ def test_full_maneuver_when_nu_is_large(table: MaxSteeringTable, v: float, tau: 
 def test_the_counter_steer_starts_by_the_peak_of_the_maneuver(table: MaxSteeringTable) -> None:
     # w far beyond y_max: full maneuver; past half a turn y_max falls, so the counter-steer starts at its peak
     v, tau = 4.1, 8.0
-    planner = MsfPlanner(MsfParams(), GRID, table)
+    planner = MsfPlanner(SCURVE, GRID, table)
     e = planner.evasion(Obstacle(40.0, 42.0, -30.0, 30.0), 0.0, 30.0, tau, v)
     peak_time = float(table.t[np.argmax(table.y_max(table.t, v))])
     assert peak_time < 5.0 and e.s1 == pytest.approx(peak_time)
@@ -218,7 +220,7 @@ def test_speed_is_kept_along_the_path(table: MaxSteeringTable) -> None:
     # add sqrt(7^2 + v_Y^2) - 7 (0.6 m/s at v_Y = 3 m/s).  What remains is the zero-order hold: a
     # constant acceleration over 0.2 s lengthens the velocity it turns
     planner, zone, _ = planned(table, 7.0, 2.0, 0.8)
-    path, _ = closed_loop(table, 7.0, zone, steps=30)
+    path, _ = closed_loop(table, 7.0, zone, steps=30, params=SCURVE)
     speed = np.hypot(path[:, 2], path[:, 3])
     assert np.max(np.abs(path[:, 3])) > 2.5
     assert np.max(speed) < 7.0 + 0.25 and np.min(speed) > 7.0 - 0.3  # measured 7.23

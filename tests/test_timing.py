@@ -236,8 +236,9 @@ IDEAL_TRACES = {
     # sha256 of every trace column (little-endian float64), 3 s after appearance, seed 0, recorded on main at eafd7a4
     # before the timing model existed; a deliberate change of the physics re-pins them and says why.
     # Re-pinned (issue 24): the MPC's plans through y_safe are the paper's "fails to provide a solution" and weigh 0;
-    # the MSF times its evasion by its own speed law (the estimate's speed is not exactly v_des)
-    (EXTREME, "combined"): "705ca98fc1dc307fb8a23064dce04b95ef59034f630e8092680f2bf5f6ce3fea",
+    # the MSF times its evasion by its own speed law (the estimate's speed is not exactly v_des); the MSF's evasion is
+    # the nu-scaled maneuver by default
+    (EXTREME, "combined"): "fcb196d8898735f8b427af47bec9293e1cd7ea87f76f7098c9da5cee727b961a",
     ("paper_v5_tau3", "mpc"): "685103ad9629240bc8ba7e87644bc915e39841733eb61ff4b43981e92efe8487",
 }
 

@@ -127,7 +127,7 @@ class MpcParams:
     """MPC planner parameters (paper defaults where the paper gives them)."""
 
     eta: tuple[float, float, float, float] = (0.5, 0.25, 0.05, 0.2)
-    """Weights η of J_safe, J_stable, J_brake, J_steer, eq. (jcaldef) (Example emp:eta's second set)."""
+    """Weights η of J_safe, J_stable, J_brake, J_steer, eq. (jcaldef) (Example 2's second set)."""
     eta_return: float = 0.1
     """Weight of the lane-keeping term η_return |ỹ| (not in the paper)."""
     barrier_margin: float = 0.3
@@ -205,7 +205,7 @@ MSF_PROFILES: tuple[MsfProfile, ...] = get_args(MsfProfile)
 class MsfParams:
     """MSF planner parameters."""
 
-    profile: MsfProfile = "scurve"
+    profile: MsfProfile = "nu_scaled"
     """The evasion reference (:data:`MsfProfile`)."""
     margin: float = 0.5
     """Lateral margin m beyond the far edge (m): the S-curve's target is w + m."""
