@@ -7,7 +7,7 @@ import subprocess
 import sys
 import uuid
 from pathlib import Path
-from typing import Iterator
+from typing import Any, Iterator
 
 import pytest
 
@@ -86,3 +86,13 @@ def dds_loopback(tmp_path_factory: pytest.TempPathFactory) -> None:
     os.environ["CYCLONEDDS_URI"] = config.as_uri()
     os.environ["MOOSE_RUNTIME"] = "dds"
     os.environ.setdefault("MOOSE_CACHE_DIR", str(Path.home() / ".cache" / "moose"))
+
+
+@pytest.fixture(scope="session")
+def paper_runs() -> Any:
+    """The runs of the paper's cases with the default configuration and seed 0, each made once for the whole test
+    session (:class:`moose.reproduce.RunCache`): the claims, the tables and the closed-loop tests share them."""
+    from moose.config import load_config
+    from moose.reproduce import RunCache
+
+    return RunCache(load_config())

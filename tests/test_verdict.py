@@ -156,19 +156,18 @@ def test_the_claims_table_is_judged_with_the_default_limits(tmp_path) -> None:
 
     from moose.config import load_config, with_overrides
     from moose.params import ParamError
-    from moose.reproduce import run_all
+    from moose.reproduce import RunCache
 
     config = with_overrides(load_config(), {"verdict.heading_max": 3.0})
     with pytest.raises(ParamError, match="heading_max = 3 instead of 1.5708: the paper's claims are judged with the "
                                          "default verdict limits"):
-        run_all(config, scenarios=["paper_v7_tau1.4"])
+        RunCache(config)
     path = tmp_path / "loose.yaml"
     path.write_text("/**:\n  ros__parameters:\n    verdict: {sideslip_max: 10.0}\n")
     out = subprocess.run([sys.executable, "-m", "moose.cli", "reproduce", "--config", str(path)], capture_output=True,
                          text=True, timeout=120)
     assert out.returncode == 2 and "moose: error: verdict: sideslip_max = 10 instead of 0.35" in out.stderr, out.stderr
-    runs = run_all(load_config(), scenarios=["paper_v5_tau3"])
-    assert runs and all(r.summary["verdict_limits_default"] for r in runs)
+    assert RunCache(load_config()).run("paper_v5_tau3").summary["verdict_limits_default"]
 
 
 # -- boundaries, reasons and flags: each threshold is inclusive on the documented side
