@@ -26,6 +26,7 @@ from moose.reproduce import (
     RunCache,
     claims,
     render_claims,
+    render_conditions,
     render_results,
     render_summary,
     render_variants,
@@ -186,6 +187,9 @@ def test_the_documented_claims_are_the_generated_ones(found: list[Claim]) -> Non
 
 
 def test_the_documented_results_are_the_generated_ones(runs: list[Run]) -> None:
+    assert block("conditions").strip() == render_conditions(runs) == (
+        "Seed 0; timing `ideal`: sensor 0 ms, planning 0 ms, command 0 ms, delay compensation off."), \
+        "docs/design.md is stale: run `moose reproduce --write docs/design.md`"
     documented = block("results")
     generated = render_results(runs)
     for index in (0, 1, 4):  # scenario, planner, outcome

@@ -23,8 +23,8 @@ def add_subparser(subparsers: Any) -> None:
     parser.add_argument("--variants", action="store_true",
                         help="also run and print the readings the paper leaves open, side by side (nine cases each)")
     parser.add_argument("--write", metavar="MARKDOWN", action="append",
-                        help="regenerate the generated blocks this file holds (calibration, results, claims, variants, "
-                             "summary: docs/design.md, README.md); may be given more than once")
+                        help="regenerate the generated blocks this file holds (calibration, conditions, results, "
+                             "claims, variants, summary: docs/design.md, README.md); may be given more than once")
     parser.add_argument("--json", help="write the summary of every run made as JSON to this path")
     parser.add_argument("--planner", metavar="P[,P...]", type=planner_list,
                         help="also run these planners (e.g. the baselines aeb,max_steer): rows of the results and of "
@@ -35,7 +35,7 @@ def add_subparser(subparsers: Any) -> None:
     parser.set_defaults(func=cmd_reproduce)
 
 
-GENERATED = ("calibration", "results", "claims", "variants", "summary")
+GENERATED = ("calibration", "conditions", "results", "claims", "variants", "summary")
 """The generated blocks a document may hold."""
 
 
@@ -46,6 +46,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         claims,
         render_calibration,
         render_claims,
+        render_conditions,
         render_results,
         render_summary,
         render_variants,
@@ -69,7 +70,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     found = claims(cache)
     print(render_claims(found))
     wanted = {name for path in writes for name in blocks_in(path, GENERATED)}
-    rendered = {"calibration": render_calibration(config.vehicle), "results": render_results(runs),
+    rendered = {"calibration": render_calibration(config.vehicle), "conditions": render_conditions(cache.asked),
+                "results": render_results(runs),
                 "claims": render_claims(found), "summary": render_summary(runs, found)}
     if args.variants or "variants" in wanted:
         rendered["variants"] = render_variants(variant_rows(cache))

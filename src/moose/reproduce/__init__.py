@@ -17,6 +17,7 @@ from .render import (
     RESULT_RUNS,
     blocks_in,
     render_calibration,
+    render_conditions,
     render_results,
     render_summary,
     result_runs,
@@ -41,6 +42,6 @@ from .variants import VARIANTS, Variant, VariantRow, render_variants, variant_ro
 __all__ = [
     "BASES", "Basis", "CALIBRATION_MU", "COMPARISON", "Claim", "DURATION", "EXTREME", "LOCK", "MUS", "Measures",
     "NINE", "PAPER_SOLVER", "RESULT_RUNS", "RETURN_BAND", "Run", "RunCache", "VARIANTS", "Variant", "VariantRow",
-    "Verdict", "blocks_in", "claims", "measure", "render_calibration", "render_claims", "render_results",
-    "render_summary", "render_variants", "result_runs", "update_document", "variant_rows",
+    "Verdict", "blocks_in", "claims", "measure", "render_calibration", "render_claims", "render_conditions",
+    "render_results", "render_summary", "render_variants", "result_runs", "update_document", "variant_rows",
 ]

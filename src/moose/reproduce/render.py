@@ -1,6 +1,7 @@
 """The generated tables of docs/design.md and the README's summary, and the blocks that hold them.
 
-:func:`render_results`, :func:`render_summary` and :func:`render_calibration` write what docs/design.md and
+:func:`render_conditions`, :func:`render_results`, :func:`render_summary` and :func:`render_calibration` write
+what docs/design.md and
 README.md carry between ``<!-- BEGIN name -->`` / ``<!-- END name -->`` markers (:func:`update_document`); the
 claims and the variants tables are :func:`moose.reproduce.claims.render_claims` and
 :func:`moose.reproduce.variants.render_variants`.  They are generated, never edited by hand.
@@ -56,11 +57,24 @@ def render_results(runs: Sequence[Run]) -> str:
     return "\n".join(lines)
 
 
+def render_conditions(runs: Sequence[Run]) -> str:
+    """What every run of the tables shares, from their summaries: the seed and the timing (which the claims, the
+    results and the variants all depend on).  Runs that differ in either are an error, not a table."""
+    seen = {(r.summary["seed"], tuple(sorted(r.summary["timing"].items()))) for r in runs}
+    if len(seen) != 1:
+        raise ValueError(f"the runs differ in seed or timing: {sorted(seen)}")
+    seed, timing = next(iter(seen))
+    t = dict(timing)
+    return (f"Seed {seed}; timing `{t['profile']}`: sensor {1e3 * t['sensor_delay_s']:g} ms, planning "
+            f"{1e3 * t['planning_delay_s']:g} ms, command {1e3 * t['command_delay_s']:g} ms, delay compensation "
+            f"{'on' if t['compensate'] else 'off'}.")
+
+
 def render_summary(runs: Sequence[Run], found: Sequence[Claim]) -> str:
     """The README's summary (markdown bullets): outcomes per planner, the extreme case, the blend's share and the
     MPC's plans through y_safe, and how many of the paper's claims hold on each road."""
     scenarios = sorted({r.scenario for r in runs})
-    lines = []
+    lines = [f"- {render_conditions(runs)}"]
     for label in dict.fromkeys(r.label for r in runs):
         counts = Counter(r.summary["outcome"] for r in runs if r.label == label)
         text = ", ".join(f"{n} {outcome}" for outcome, n in sorted(counts.items(), key=lambda kv: (-kv[1], kv[0])))
