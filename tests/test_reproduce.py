@@ -105,7 +105,7 @@ PINNED = [  # (where, start of the criterion, holds at μ = 0.33, holds at μ = 
     ("Sec. VI-B", "combined runs (MPC projected_newton), w = 2.0 and 2.4 m", False, True),
     ("Sec. VI-B", "the combined's speed reference v_x* rises above the speed at detection", True, True),
     ("Sec. VI-A", "the 1 Hz GPS's 0.2 s lag delays", False, False),
-    ("Sec. VI-A", "as above, late fixes fused on arrival", True, True),
+    ("Sec. VI-A", "as above, late fixes fused on arrival", False, True),
     ("Observation 2", "the lag's mean delay of the return at 6 m/s", False, False),
     ("Observation 2", "as above, late fixes fused on arrival", False, False),
     ("Sec. VI-C, Observation 3", "in all three 7 m/s cases", True, True),
@@ -160,8 +160,8 @@ def test_the_papers_trigger_fires_in_the_extreme_case(paper_runs: RunCache) -> N
         assert 0 < alone.measures.barrier_violations < alone.measures.mpc_threat_plans
         assert alone.summary["mpc_status_counts"]["barrier_violated"] >= alone.measures.barrier_violations
     combined = paper_runs.run(EXTREME, "combined", PAPER_FRICTION)
-    assert combined.summary["outcome"] == "clear"
-    assert combined.summary["min_clearance_m"] == pytest.approx(0.13, abs=0.05)
+    assert combined.summary["outcome"] == "clear"  # by 0.02 m with the car's latency chain (0.13 m without)
+    assert combined.summary["min_clearance_m"] == pytest.approx(0.02, abs=0.015)
     assert combined.summary["mean_weight_mpc"] < 0.01 and combined.measures.barrier_violations > 0
 
 
@@ -188,7 +188,7 @@ def test_the_documented_claims_are_the_generated_ones(found: list[Claim]) -> Non
 
 def test_the_documented_results_are_the_generated_ones(runs: list[Run]) -> None:
     assert block("conditions").strip() == render_conditions(runs) == (
-        "Seed 0; timing `ideal`: sensor 0 ms, planning 0 ms, command 0 ms, delay compensation off."), \
+        "Seed 0; timing `car`: sensor 10 ms, planning 20 ms, command 10 ms, delay compensation off."), \
         "docs/design.md is stale: run `moose reproduce --write docs/design.md`"
     documented = block("results")
     generated = render_results(runs)
