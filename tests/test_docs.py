@@ -67,3 +67,23 @@ def test_every_link_points_into_the_repository(path: Path) -> None:
     for target in re.findall(r"\]\(([^)\s]+)\)", text):
         local = (path.parent / target.split("#")[0]).resolve()
         assert local.is_relative_to(ROOT) and local.exists(), f"{target} is not a file of the repository"
+
+
+def test_every_equation_label_quoted_is_in_the_table_of_the_papers_equations() -> None:
+    """A reader with the printed paper finds every ``eq. (label)`` of the docs and docstrings in docs/design.md's
+    table of the paper's equations, which gives its printed number."""
+    start = DESIGN.index("### The paper's equations and figures")
+    table = DESIGN[start:DESIGN.index("\nFigures:", start)]
+    listed = set(re.findall(r"\(([A-Za-z]+)\)", "".join(line.split("|")[1] for line in table.splitlines()
+                                                       if line.startswith("| ("))))
+    quoted: dict[str, str] = {}
+    files = [*markdown_files(), *sorted((ROOT / "src").rglob("*.py")), *sorted((ROOT / "ros2_ws").rglob("*.py"))]
+    pattern = re.compile(r"eqs?\. (\([A-Za-z]+\)(?:,? (?:and )?\([A-Za-z]+\))*)")
+    for path in files:
+        for group in pattern.findall(path.read_text(encoding="utf-8")):
+            for label in re.findall(r"\(([A-Za-z]+)\)", group):
+                quoted.setdefault(label, str(path.relative_to(ROOT)))
+    quoted.pop("label", None)  # the convention's own placeholder
+    assert {"skin", "ysafe", "planmpc", "FBL"} <= set(quoted)  # the search finds what it is for
+    missing = {label: where for label, where in quoted.items() if label not in listed}
+    assert not missing, f"labels quoted but not in docs/design.md's table of the paper's equations: {missing}"

@@ -443,3 +443,19 @@ def test_a_journal_line_cut_by_a_kill_costs_only_that_case(tmp_path: Path) -> No
     rows = rows_of(out)
     assert len(rows) == 2 and {r["case_id"] for r in rows} == {json.loads(line)["case_id"] for line in lines}
     assert json.loads((out / "cases.jsonl").read_text().splitlines()[0]) == json.loads(lines[0])
+
+
+def test_a_rows_mpc_statuses_count_the_plans_through_the_barrier() -> None:
+    """The paper's hand-over trigger is in every row: ``mpc_status_counts`` counts ``barrier_violated`` (7 m/s,
+    τ = 1.4 s: the MPC's plans cannot lift the car over y_safe)."""
+    from moose.config import load_config
+    from moose.paper import PAPER_FRICTION
+    from moose.sweep.axes import Case
+    from moose.sweep.case import run_case
+
+    case = Case(speed=7.0, tau=1.4, half_width=2.0, nu=None, length=2.0, duration=2.0, field_margin=None,
+                mu=PAPER_FRICTION, planner="mpc", seed=0)
+    row = run_case(case, load_config())
+    assert row["status"] == "done", row["error"]
+    counts = json.loads(row["mpc_status_counts"])
+    assert counts["barrier_violated"] > 0 and sum(counts.values()) == row["mpc_solve_ms.count"]
