@@ -77,6 +77,15 @@ def segment_hits_box(x0: float, y0: float, x1: float, y1: float, box: Obstacle) 
     return True
 
 
+def _near(x: np.ndarray, y: np.ndarray, box: Obstacle) -> list[int]:
+    """The segments i (from sample i to i + 1) whose bounding boxes meet the closed ``box``: the only ones that can
+    touch it (:func:`segment_hits_box` decides for them)."""
+    x0, x1, y0, y1 = x[:-1], x[1:], y[:-1], y[1:]
+    near = ((np.minimum(x0, x1) <= box.x_max) & (np.maximum(x0, x1) >= box.x_min)
+            & (np.minimum(y0, y1) <= box.y_max) & (np.maximum(y0, y1) >= box.y_min))
+    return np.flatnonzero(near).tolist()
+
+
 def _coverage(t: np.ndarray, end_time: float, max_gap: float) -> Optional[str]:
     """Why the samples do not cover [0, end_time], or None."""
     if t.size == 0:
@@ -113,7 +122,7 @@ def judge(t: np.ndarray, x: np.ndarray, y: np.ndarray, theta: np.ndarray, vx: np
         return Verdict("incomplete", False, False, False, False, False, None, None, None, missing or "")
     gap = zone.clearance(x, y)
     hit = bool(np.any(gap <= 0.0)) or any(
-        segment_hits_box(float(x[i]), float(y[i]), float(x[i + 1]), float(y[i + 1]), zone) for i in range(len(x) - 1))
+        segment_hits_box(float(x[i]), float(y[i]), float(x[i + 1]), float(y[i + 1]), zone) for i in _near(x, y, zone))
     min_clearance = float(np.min(gap))
     if hit:
         min_clearance = min(min_clearance, 0.0)

@@ -21,6 +21,7 @@ planning problem :data:`PLANNING_PROBLEM_ID`.
 from __future__ import annotations
 
 import importlib.util
+from functools import lru_cache
 
 from ..params import ParamError
 
@@ -37,8 +38,9 @@ PACKAGES = ("commonroad", "commonroad_dc", "commonroad_crime")
 INSTALL = "pip install 'moose-avoidance[commonroad]'"
 
 
+@lru_cache(maxsize=1)
 def available() -> bool:
-    """Whether the three CommonRoad packages can be imported."""
+    """Whether the three CommonRoad packages can be imported (asked once per process: every run's summary asks)."""
     return all(importlib.util.find_spec(name) is not None for name in PACKAGES)
 
 
