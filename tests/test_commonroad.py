@@ -319,3 +319,42 @@ def test_write_replaces_a_file_only_with_a_whole_one(runs: dict, tmp_path: Path)
     write(exported, target)
     assert CommonRoadFileReader(str(target)).open()[0].obstacle_by_id(EGO_ID) is not None
     assert [p.name for p in tmp_path.iterdir()] == ["run.xml"]
+
+
+def test_a_sweep_with_criticality_rows_the_measures_of_each_situation_and_maps_nu_against_them(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``moose sweep --criticality``: every row carries its situation's measures (both planners of the situation
+    those of :func:`criticality.measures`), and ``moose sweep plot`` draws ν and τ against them; a sweep without the
+    flag has no measures and its rows say why."""
+    from moose.cli import main
+    from moose.sweep.case import case_scenario
+    from moose.sweep.store import RunFolder
+
+    out = tmp_path / "sweep"
+    args = ["sweep", "--speed", "5", "--obstacle-half-width", "1.5", "--mu", "0.8", "--duration", "3", "--workers", "1",
+            "--quiet"]
+    assert main([*args, "--tau", "2,3", "--planner", "combined,aeb", "--criticality", "-o", str(out)]) == 0
+    rows = RunFolder(out).rows()
+    assert len(rows) == 4
+    measures = {(r["input.tau_s"], r["input.planner"]): {k: v for k, v in r.items() if k.startswith("criticality.")}
+                for r in rows}
+    assert measures[2, "combined"] == measures[2, "aeb"] != measures[3, "combined"] == measures[3, "aeb"]
+    expected = criticality.measures(case_scenario(_case_of(rows[0])), dataclasses.replace(CONFIG.vehicle, mu=0.8))
+    for key, value in expected.items():
+        assert rows[0][f"criticality.{key}"] == (value if math.isfinite(value) else None), key
+    assert main(["sweep", "plot", str(out), "--plot-output", str(tmp_path / "maps")]) == 0
+    assert (tmp_path / "maps" / "criticality.png").stat().st_size > 0
+    assert "criticality.png" in (tmp_path / "maps" / "index.html").read_text(encoding="utf-8")
+    assert main([*args, "--tau", "2", "-o", str(tmp_path / "plain")]) == 0
+    (plain,) = RunFolder(tmp_path / "plain").rows()
+    assert plain["criticality"] is None and "--criticality" in plain["notes"]
+    capsys.readouterr()
+
+
+def _case_of(row: dict):
+    from moose.sweep.axes import Case
+
+    return Case(speed=row["input.speed_mps"], tau=row["input.tau_s"], half_width=row["input.half_width_m"],
+                nu=row["input.nu"], length=row["input.length_m"], duration=row["input.duration_s"],
+                field_margin=row["input.field_margin_m"], mu=row["input.mu"], planner=row["input.planner"],
+                seed=row["input.seed"])

@@ -67,6 +67,9 @@ def add_subparser(subparsers: Any) -> None:
                      help="seconds to wait for the Dask scheduler and a first worker (default 10)")
     run.add_argument("--timeout", type=positive_float, default=300.0,
                      help="time limit of one case, s (default 300); a case over it is recorded as timeout")
+    run.add_argument("--criticality", action="store_true",
+                     help="add commonroad-crime's TTC, TTB, TTS, TTK, TTR of each case's situation to its row "
+                          "(criticality.*; about 5 s per worker to import and 0.5-1.5 s per situation)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     plot = sweep.add_argument_group("plot")
     plot.add_argument("--plot-output", help="(plot) folder of the PNGs and index.html (default: FOLDER/maps)")
@@ -104,11 +107,13 @@ def _axes(args: argparse.Namespace) -> list[Any]:
 
 AXIS_OPTIONS = ("speed", "tau", "obstacle_half_width", "nu", "mu", "planner", "obstacle_length", "duration",
                 "field_margin", "samples", "output", "config", "address", "workers", "backend", "timing")
+"""Options of a sweep that ``moose sweep plot`` refuses (``--criticality`` too)."""
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
     if args.action == "plot":
-        given = [name for name in AXIS_OPTIONS if getattr(args, name) is not None] + (["set"] if args.set else [])
+        given = ([name for name in AXIS_OPTIONS if getattr(args, name) is not None] + (["set"] if args.set else [])
+                 + (["criticality"] if args.criticality else []))
         if given:
             flag = "--" + given[0].replace("_", "-")
             raise ParamError(f"{flag} is an option of the sweep, not of 'moose sweep plot DIR' "
@@ -125,9 +130,13 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from ..sweep.store import RunFolder, pyarrow_or_error
 
     pyarrow_or_error()
+    if args.criticality:
+        from ..commonroad import require
+
+        require("--criticality")
     config = with_timing(load_config(args.config, "moose sweep"), args)
     spec = SweepSpec(tuple(_axes(args)), config, samples=args.samples, sampling=args.sampling,
-                     sampling_seed=args.sampling_seed)
+                     sampling_seed=args.sampling_seed, criticality=args.criticality)
     if args.mu is not None and ":" in args.mu and args.mu.count(":") == 1:
         print("moose: warning: a sampled --mu builds a maneuver table (about 0.4 s) for every distinct mu, in this "
               "process for --nu and in every worker; a list of frictions is much faster", file=sys.stderr)
@@ -148,13 +157,15 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             raise ParamError("--backend dask needs --address tcp://HOST:PORT of the scheduler")
         if args.workers is not None:
             raise ParamError("--workers is for the local backend; a Dask cluster has its own workers")
-        backend: Any = DaskBackend(spec.config, args.address, args.timeout, args.connect_timeout)
+        backend: Any = DaskBackend(spec.config, args.address, args.timeout, args.connect_timeout,
+                                   criticality=spec.criticality)
     else:
         if args.address:
             raise ParamError("--address is for a Dask cluster, not --backend local")
         import os
 
-        backend = LocalBackend(spec.config, args.workers or os.cpu_count() or 1, args.timeout)
+        backend = LocalBackend(spec.config, args.workers or os.cpu_count() or 1, args.timeout,
+                               criticality=spec.criticality)
     try:
         folder.start(spec, len(cases), backend.name)
         print(f"sweep           {len(cases)} cases -> {output}  (backend {backend.name})", file=sys.stderr)

@@ -3,6 +3,8 @@
 Both backends take the same cases and call :func:`moose.sweep.case.run_case` on them, so a sweep
 gives the same rows on either (``tests/test_sweep.py`` checks it on a local two-worker cluster).
 
+Both pass ``criticality`` (``moose sweep --criticality``) on to every case.
+
 * :class:`LocalBackend` — ``workers`` processes of its own (spawned, so nothing of the parent's
   threads is inherited), one case each at a time over a pipe.  The parent knows which case every
   worker holds: a worker that dies (a segfault in compiled code, the OOM killer) has its case
@@ -39,7 +41,7 @@ class Backend(Protocol):
         """Run every case, passing each row to ``on_row`` as it arrives (in the calling thread)."""
 
 
-def _worker(conn: Connection, base: Config, timeout: Optional[float]) -> None:
+def _worker(conn: Connection, base: Config, timeout: Optional[float], criticality: bool) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     while True:
         try:
@@ -48,15 +50,15 @@ def _worker(conn: Connection, base: Config, timeout: Optional[float]) -> None:
             return
         if case is None:
             return
-        conn.send(run_case(case, base, timeout))
+        conn.send(run_case(case, base, timeout, criticality))
 
 
 class _Process:
     """One worker process and the case it holds."""
 
-    def __init__(self, context: Any, base: Config, timeout: Optional[float]) -> None:
+    def __init__(self, context: Any, base: Config, timeout: Optional[float], criticality: bool) -> None:
         self.conn, child = context.Pipe()
-        self.process = context.Process(target=_worker, args=(child, base, timeout), daemon=True)
+        self.process = context.Process(target=_worker, args=(child, base, timeout, criticality), daemon=True)
         self.process.start()
         child.close()
         self.case: Optional[Case] = None
@@ -86,16 +88,21 @@ class LocalBackend:
 
     name = "local"
 
-    def __init__(self, base: Config, workers: int, timeout: Optional[float], grace: float = 10.0) -> None:
+    def __init__(self, base: Config, workers: int, timeout: Optional[float], grace: float = 10.0,
+                 criticality: bool = False) -> None:
         if not (isinstance(workers, int) and workers >= 1):
             raise ParamError(f"--workers {workers!r} is invalid: expected a positive number of processes")
         self.base, self.workers, self.timeout, self.grace = base, workers, timeout, grace
+        self.criticality = criticality
         self._context = multiprocessing.get_context("spawn")
+
+    def _spawn(self) -> _Process:
+        return _Process(self._context, self.base, self.timeout, self.criticality)
 
     def run(self, cases: Iterable[Case], on_row: OnRow) -> None:
         queue = list(cases)
         queue.reverse()
-        pool = [_Process(self._context, self.base, self.timeout) for _ in range(min(self.workers, len(queue)))]
+        pool = [self._spawn() for _ in range(min(self.workers, len(queue)))]
         try:
             for worker in pool:
                 if queue:
@@ -120,7 +127,7 @@ class LocalBackend:
                     worker.case = None
                     if not worker.process.is_alive():
                         worker.stop(kill=True)
-                        worker = pool[i] = _Process(self._context, self.base, self.timeout)
+                        worker = pool[i] = self._spawn()
                     on_row(row)
                     if queue:
                         case = queue.pop()
@@ -128,7 +135,7 @@ class LocalBackend:
                             worker.give(case)
                         except OSError:  # it died between two cases: a new one takes the case
                             worker.stop(kill=True)
-                            worker = pool[i] = _Process(self._context, self.base, self.timeout)
+                            worker = pool[i] = self._spawn()
                             worker.give(case)
         finally:
             for worker in pool:
@@ -200,14 +207,15 @@ class DaskBackend:
 
     name = "dask"
 
-    def __init__(self, base: Config, address: str, timeout: Optional[float], connect_timeout: float = 10.0) -> None:
+    def __init__(self, base: Config, address: str, timeout: Optional[float], connect_timeout: float = 10.0,
+                 criticality: bool = False) -> None:
         try:
             from distributed import Client
         except ImportError:
             raise ParamError("--backend dask needs dask.distributed: pip install 'moose-avoidance[dask]'") from None
         from .store import code_version
 
-        self.base, self.timeout = base, timeout
+        self.base, self.timeout, self.criticality = base, timeout, criticality
         speaks_dask(address, connect_timeout)
         try:
             self.client = Client(address, timeout=f"{connect_timeout}s", set_as_default=False)
@@ -241,7 +249,7 @@ class DaskBackend:
 
         token = uuid.uuid4().hex[:8]
         base = self.client.scatter(self.base, broadcast=True)
-        futures = self.client.map(run_case, cases, base=base, timeout=self.timeout,
+        futures = self.client.map(run_case, cases, base=base, timeout=self.timeout, criticality=self.criticality,
                                   key=[f"moose-case-{c.id}-{token}" for c in cases], pure=False)
         by_key = {f.key: c for f, c in zip(futures, cases)}
         try:

@@ -60,11 +60,12 @@ def case_scenario(case: Case) -> Any:
 
 
 def flatten(summary: dict[str, Any]) -> dict[str, Any]:
-    """A run summary as row columns: the solve times and the timing with dotted names, mappings of counts and notes
-    as JSON."""
+    """A run summary as row columns: the solve times, the timing and the criticality measures with dotted names
+    (``criticality.ttc_s``; without them ``criticality`` is null and the notes say why), mappings of counts and
+    notes as JSON."""
     row: dict[str, Any] = {}
     for key, value in summary.items():
-        if key in ("mpc_solve_ms", "timing"):
+        if key in ("mpc_solve_ms", "timing") or (key == "criticality" and value is not None):
             row.update({f"{key}.{k}": v for k, v in value.items()})
         elif isinstance(value, (dict, list)):
             row[key] = json.dumps(value, sort_keys=True)
@@ -122,8 +123,10 @@ def failed_row(case: Case, status: Status, error: str, wall_s: Optional[float], 
             "worker_max_rss_mb": max_rss_mb() if worker == worker_name() else None}
 
 
-def run_case(case: Case, base: Config, timeout: Optional[float] = None) -> dict[str, Any]:
-    """Run one case and return its row; never raises for a failure of the case itself."""
+def run_case(case: Case, base: Config, timeout: Optional[float] = None, criticality: bool = False) -> dict[str, Any]:
+    """Run one case and return its row; never raises for a failure of the case itself.  With ``criticality`` the
+    row carries commonroad-crime's measures of the case's situation (:mod:`moose.commonroad.criticality`: computed
+    once per situation in a process, so the planners and seeds of a situation share them)."""
     from ..metrics import summarize
     from ..simulation import simulate
 
@@ -132,7 +135,7 @@ def run_case(case: Case, base: Config, timeout: Optional[float] = None) -> dict[
         with _Deadline(timeout):
             config = case_config(base, case.overrides)
             result = simulate(config, case_scenario(case), case.planner, case.seed)
-            summary = summarize(result)
+            summary = summarize(result, criticality=criticality)
     except CaseTimeout:
         return failed_row(case, "timeout", f"stopped after the time limit of {timeout:g} s",
                           time.perf_counter() - start, worker_name())

@@ -443,7 +443,56 @@ def draw_maps(folder: Path, out: Path, x: Optional[str] = None, y: Optional[str]
             figures.append(("Where the combined planner beats MPC alone and MSF alone", advantage))
         figures.append(("Outcome", outcome_map(cells, facets, out / f"outcome{suffix}.png")))
         figures.append(("Minimum clearance", clearance_map(cells, facets, out / f"clearance{suffix}.png")))
+    measures = criticality_map(rows, out / "criticality.png")
+    if measures is not None:
+        figures.append(("ν and τ against the literature's criticality measures (commonroad-crime)", measures))
     return write_report(out / "index.html", rows, cells, figures, points, manifest)
+
+
+MEASURES = (("ttc_s", "TTC"), ("ttb_s", "TTB"), ("tts_s", "TTS"), ("ttk_s", "TTK"), ("ttr_s", "TTR"))
+"""commonroad-crime's measures the criticality map plots ν and τ against (row columns ``criticality.<key>``)."""
+
+
+def criticality_map(rows: Sequence[dict[str, Any]], path: Path) -> Optional[Path]:
+    """ν and τ (as the detector measured them) against commonroad-crime's TTC, TTB, TTS, TTK and TTR, one point per
+    situation (friction, speed, τ, width, length: its planners and seeds share the measures), coloured by μ; None
+    when the rows carry no measures (a sweep without ``--criticality``).  A measure that is ±∞ ("never needed", "no
+    such maneuver avoids it": null in the row) has no point; each panel says how many situations it lacks."""
+    keyed = [r for r in rows if r.get("status") == "done" and f"criticality.{MEASURES[0][0]}" in r]
+    if not keyed:
+        return None
+    import matplotlib.pyplot as plt
+
+    situations: dict[tuple, dict[str, Any]] = {}
+    for r in keyed:
+        situation = tuple(r.get(c) for c in ("input.mu", "input.speed_mps", "input.tau_s", "input.half_width_m",
+                                             "input.length_m"))
+        situations.setdefault(situation, r)
+    points = list(situations.values())
+    mus = sorted({float(p["input.mu"]) for p in points})
+    colours = plt.get_cmap("viridis")(np.linspace(0.1, 0.85, max(len(mus), 1)))
+    fig, axes = plt.subplots(2, len(MEASURES), figsize=(3.0 * len(MEASURES), 6.0), squeeze=False,
+                             layout="constrained")
+    for j, (key, label) in enumerate(MEASURES):
+        for i, (column, name) in enumerate((("nu", "ν (detector)"), ("tau_s", "τ (detector), s"))):
+            ax = axes[i, j]
+            missing = 0
+            for mu, colour in zip(mus, colours):
+                here = [p for p in points if float(p["input.mu"]) == mu]
+                xy = [(p[f"criticality.{key}"], p[column]) for p in here]
+                shown = [(x, y) for x, y in xy if x is not None and y is not None]
+                missing += len(xy) - len(shown)
+                if shown:
+                    ax.scatter(*zip(*shown), s=9, color=colour, alpha=0.8, label=f"μ = {mu:g}")
+            ax.set(xlabel=f"{label} (s)", ylabel=name if j == 0 else None,
+                   title=f"{label}" + (f" ({missing} at ±∞)" if missing else ""))
+            ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle(f"the paper's ν and τ against commonroad-crime's measures at detection ({len(points)} situations)",
+                 fontsize=9)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
 
 
 def check_default_limits(rows: Sequence[dict[str, Any]], manifest: Optional[dict[str, Any]], where: str) -> None:

@@ -48,16 +48,22 @@ class SweepSpec:
     samples: Optional[int] = None
     sampling: Sampling = "lhs"
     sampling_seed: int = 0
+    criticality: bool = False
+    """Every row also carries commonroad-crime's measures of its situation (``criticality.*``)."""
 
     def describe(self) -> dict[str, Any]:
-        """The spec as JSON-safe data (the manifest's ``spec``); its hash identifies the sweep."""
-        return {
+        """The spec as JSON-safe data (the manifest's ``spec``); its hash identifies the sweep (``criticality`` is
+        there only when asked, so a sweep recorded before it existed keeps its hash)."""
+        described = {
             "axes": {axis.name: axis.describe() for axis in self.axes},
             "samples": self.samples,
             "sampling": self.sampling if self.samples is not None else "grid",
             "sampling_seed": self.sampling_seed,
             "config": config_as_ros_params(self.config),
         }
+        if self.criticality:
+            described["criticality"] = True
+        return described
 
     @property
     def hash(self) -> str:
