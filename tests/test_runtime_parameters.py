@@ -147,23 +147,29 @@ def running(specs: dict[str, tuple[list[str], dict[str, str]]], folder: Path) ->
 
 
 def _node(python: str, name: str) -> list[str]:
-    extra = ["--param", "scenario=paper_v6_w2.0"] if name == "observer" else ["--param", "mpc_timeout=0.05"]
+    given = ["scenario=paper_v6_w2.0"] if name == "observer" else ["mpc_timeout=0.05", "minimum_risk.stop_speed=0.1",
+                                                                     "vehicle.T_max=200.0"]
+    extra = [arg for value in given for arg in ("--param", value)]
     return [python, "-m", "moose.cli", "node", name, "--param", "use_sim_time=true", "--param",
             "simulation.planner=combined", *extra]
 
 
 def test_a_running_node_refuses_every_parameter_change(ros_env: dict[str, str], tmp_path: Path) -> None:
-    """``moose node observer`` and ``weight_fbl`` on rclpy, with simulated time as in a graph."""
+    """``moose node observer`` and ``weight_fbl`` on rclpy, with simulated time as in a graph: the clock, the planner
+    mode, a node parameter, a minimum-risk value and a vehicle limit are all refused and stay what the node uses."""
     env = {**ros_env, "MOOSE_RUNTIME": "rclpy"}
-    requests = {"/observer": {"use_sim_time": False}, "/weight_fbl": {"simulation.planner": "mpc", "mpc_timeout": 1.0}}
+    requests = {"/observer": {"use_sim_time": False},
+                "/weight_fbl": {"simulation.planner": "mpc", "mpc_timeout": 1.0, "minimum_risk.stop_speed": 1000.0,
+                                "vehicle.T_max": 1e6}}
     with running({name: (_node(env["MOOSE_ROS_PYTHON"], name), env) for name in ("observer", "weight_fbl")},
                  tmp_path):
         report = run_child(env["MOOSE_ROS_PYTHON"], CLIENT, [json.dumps(requests), "30"], ros_env)
     observer, weight_fbl = report["/observer"], report["/weight_fbl"]
     assert observer["set"] == [[False, "Trying to set a read-only parameter: use_sim_time."]]
     assert observer["after"] == {"use_sim_time": True}  # what the node runs on, still
-    assert [ok for ok, _reason in weight_fbl["set"]] == [False, False]
-    assert weight_fbl["after"] == {"simulation.planner": "combined", "mpc_timeout": 0.05}  # what the node uses
+    assert [ok for ok, _reason in weight_fbl["set"]] == [False] * 4
+    assert weight_fbl["after"] == {"simulation.planner": "combined", "mpc_timeout": 0.05,  # what the node uses
+                                   "minimum_risk.stop_speed": 0.1, "vehicle.T_max": 200.0}
     for described in (observer["read_only"], weight_fbl["read_only"]):
         assert {"use_sim_time", "simulation.planner"} <= set(described)
         for name, (read_only, why) in described.items():
