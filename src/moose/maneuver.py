@@ -34,7 +34,7 @@ import numpy as np
 
 from .params import VehicleParams
 from .schema import ManeuverParams
-from .tire import pacejka
+from .tire import Axles, lateral_forces
 
 ArrayLike = Union[float, np.ndarray]
 
@@ -58,19 +58,18 @@ class ManeuverProfile(NamedTuple):
 def _rates(s: Any, v: Any, delta: Any, q: Sequence[Any], ops: ModuleType) -> tuple[Any, Any, Any, Any]:
     """Right-hand side of eq. (ymax) for the state [v_y, γ, θ, y] at the constant speed ``v``.
 
-    ``q`` = (m, I_zz, l_f, l_r, B_y, C_y, μ F_zf, μ F_zr); NumPy arrays (one
-    column per speed) or CasADi symbols alike (``ops`` = numpy or casadi):
+    ``q`` = (m, I_zz, *:class:`~moose.tire.Axles`); NumPy arrays (one column per speed) or
+    CasADi symbols alike (``ops`` = numpy or casadi):
 
-        α_f = δ − (v_y + l_f γ)/v_x,  α_r = (l_r γ − v_y)/v_x       eq. (alphas), β ≈ v_y/v_x
-        F_y = μ F_z sin(C_y atan(B_y α))                            eq. (fy)
+        F_yf, F_yr at the slip angles with β ≈ v_y/v_x             eqs. (fy), (alphas): moose.tire
         v̇_y = (F_yf + F_yr)/m − v_x γ,  γ̇ = (F_yf l_f − F_yr l_r)/I_zz   eq. (eomdyn)
         θ̇ = γ,  ẏ = v_Y = v_x sin θ + v_y cos θ                     eq. (trajdef)
     """
-    m, izz, lf, lr, b, c, fzf, fzr = q
+    m, izz, *tyres = q
+    axles = Axles(*tyres)
     vy, gamma, theta = s[0], s[1], s[2]
-    fyf = pacejka(delta - (vy + lf * gamma) / v, fzf, b, c, ops)
-    fyr = pacejka((lr * gamma - vy) / v, fzr, b, c, ops)
-    return ((fyf + fyr) / m - v * gamma, (fyf * lf - fyr * lr) / izz, gamma,
+    fyf, fyr = lateral_forces(vy, gamma, delta, v, axles, ops)
+    return ((fyf + fyr) / m - v * gamma, (fyf * axles.lf - fyr * axles.lr) / izz, gamma,
             v * ops.sin(theta) + vy * ops.cos(theta))
 
 
@@ -81,8 +80,8 @@ def _lateral_acceleration(s: Any, sdot: Any, v: Any, ops: ModuleType) -> Any:
 
 
 def _coefficients(vehicle: VehicleParams, mu: float) -> tuple[float, ...]:
-    p = vehicle
-    return (p.m, p.Izz, p.lf, p.lr, p.By, p.Cy, mu * p.Fzf, mu * p.Fzr)
+    """The ``q`` of :func:`_rates`: (m, I_zz, *axles)."""
+    return (vehicle.m, vehicle.Izz, *Axles.of(vehicle, mu))
 
 
 def integrate_y_max(vehicle: VehicleParams, mu: float, speeds: Sequence[float] | np.ndarray, t_max: float,
@@ -165,8 +164,10 @@ def maneuver_profile(vehicle: VehicleParams, mu: float, speeds: Sequence[float] 
     sgn = -1.0 if side < 0 else 1.0
     s = ca.SX.sym("s", 4)
     vs = ca.SX.sym("v")
-    qs = ca.SX.sym("q", 9)
-    q, delta = [qs[i] for i in range(8)], qs[8]
+    q_value = np.array(_coefficients(vehicle, mu) + (sgn * vehicle.delta_max,))  # the q of _rates, then δ
+    n_q = q_value.size - 1
+    qs = ca.SX.sym("q", n_q + 1)
+    q, delta = [qs[i] for i in range(n_q)], qs[n_q]
 
     def f(x: ca.SX) -> ca.SX:
         return ca.vertcat(*_rates(x, vs, delta, q, ca))
@@ -181,10 +182,9 @@ def maneuver_profile(vehicle: VehicleParams, mu: float, speeds: Sequence[float] 
     xdot = f(x)
     chunk = ca.Function("ymax_chunk", [s, vs, qs], [x, ca.vertcat(xdot[3], _lateral_acceleration(x, xdot, vs, ca))])
     run_steps = chunk.mapaccum("ymax_steps", n_chunks, [0], [0])
-    s0, v0, q0 = ca.MX.sym("s0", 4), ca.MX.sym("v0"), ca.MX.sym("q0", 9)
+    s0, v0, q0 = ca.MX.sym("s0", 4), ca.MX.sym("v0"), ca.MX.sym("q0", n_q + 1)
     states_sym, rates_sym = run_steps(s0, ca.repmat(v0, 1, n_chunks), ca.repmat(q0, 1, n_chunks))
     run = ca.Function("ymax_run", [s0, v0, q0], [states_sym, rates_sym]).map("ymax_map", "serial", v.size, [2], [])
-    q_value = np.array(_coefficients(vehicle, mu) + (sgn * vehicle.delta_max,))
     # the map concatenates the speeds' (rows × n_chunks) blocks horizontally
     states, rates = (np.asarray(a).reshape(-1, v.size, n_chunks) for a in run(state, v.reshape(1, -1), q_value))
     ys, vYs, aYs, thetas = (np.vstack([a, np.zeros((n_chunks, v.size))])

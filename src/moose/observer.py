@@ -49,7 +49,7 @@ from .ccompile import bind, compile_function
 from .params import VehicleParams
 from .schema import ObserverParams
 from .signals import EpsSample, GpsSample, ImuSample, StateEstimate, WheelSpeedSample
-from .tire import pacejka
+from .tire import Axles, lateral_forces
 from .vehicle import symbolic_params, vehicle_vector
 
 Sample = Union[ImuSample, GpsSample, WheelSpeedSample, EpsSample]
@@ -341,8 +341,7 @@ def _ekf(estimate_mu: bool = False) -> dict[str, Any]:
     theta, vx, vy, gamma = x[2], x[3], x[4], x[5]
     mu = x[MU] if estimate_mu else mu_in
     v_bar = ca.fmax(vx, p.v_low)
-    fyf = pacejka(delta - (vy + p.lf * gamma) / v_bar, mu * p.Fzf, p.By, p.Cy, ops=ca)
-    fyr = pacejka(-(vy - p.lr * gamma) / v_bar, mu * p.Fzr, p.By, p.Cy, ops=ca)
+    fyf, fyr = lateral_forces(vy, gamma, delta, v_bar, Axles.of(p, mu), ops=ca)
     lateral = (fyf * ca.cos(delta) + fyr) / p.m  # the IMU's a_y
     rates = [vx * ca.cos(theta) - vy * ca.sin(theta), vx * ca.sin(theta) + vy * ca.cos(theta), gamma,
              ax + vy * gamma, lateral - vx * gamma, (fyf * ca.cos(delta) * p.lf - fyr * p.lr) / p.Izz]

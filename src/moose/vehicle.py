@@ -10,7 +10,7 @@ torques).
   unbraked (F_xf = 0); static axle loads (Table I gives no CoG height).
 * Lateral tyres: eq. (fy) on the slip angles of eq. (alphas) with β ≈ v_y / v_x,
   written with the bounded speed ``v̄ = max(v_x, v_low)`` in the denominators:
-  α_f = δ − (v_y + l_f γ) / v̄, α_r = −(v_y − l_r γ) / v̄.
+  α_f = δ − (v_y + l_f γ) / v̄, α_r = (l_r γ − v_y) / v̄ (:func:`moose.tire.lateral_forces`).
 * Rear tyres: longitudinal magic formula (B_x, C_x) on the slip ratio
   λ = (r ω − v_w) / max(|v_w|, r|ω|, v_low) of each wheel, wheel ground speed
   v_w = v_x ∓ γ b/2, load F_zr / 2 each; wheel dynamics J_ωr ω̇ = T − r F_x;
@@ -46,7 +46,7 @@ import numpy as np
 
 from .ccompile import CompiledFunction, bind, compile_function
 from .params import ParamError, VehicleParams
-from .tire import pacejka
+from .tire import Axles, lateral_forces, pacejka
 
 X, Y, THETA, VX, VY, GAMMA, OMEGA_RL, OMEGA_RR, DELTA = range(9)
 """Indices of the plant state vector."""
@@ -64,11 +64,7 @@ def dynamics(state: Any, u: Any, p: VehicleParams) -> tuple[Any, Any]:
     t_rl = ca.fmin(ca.fmax(u[1], -p.T_max), p.T_max)
     t_rr = ca.fmin(ca.fmax(u[2], -p.T_max), p.T_max)
     v_bar = ca.fmax(vx, p.v_low)
-    # eq. (alphas), bounded denominators
-    alpha_f = delta - (vy + p.lf * gamma) / v_bar
-    alpha_r = -(vy - p.lr * gamma) / v_bar
-    fyf = pacejka(alpha_f, p.mu * p.Fzf, p.By, p.Cy, ops=ca)
-    fyr = pacejka(alpha_r, p.mu * p.Fzr, p.By, p.Cy, ops=ca)
+    fyf, fyr = lateral_forces(vy, gamma, delta, v_bar, Axles.of(p, p.mu), ops=ca)  # bounded denominators
     # rear longitudinal slip and force per wheel
     half = 0.5 * p.track
     forces = []

@@ -24,7 +24,7 @@ import numpy as np
 from ..params import VehicleParams
 from ..schema import FblParams
 from ..signals import Reference, StateEstimate
-from ..tire import inverse_lateral, pacejka
+from ..tire import Axles, inverse_lateral, pacejka
 
 
 class FeedbackLinearization:
@@ -36,8 +36,7 @@ class FeedbackLinearization:
         """The vehicle as the stack believes it (the planning μ)."""
         self.t_s = t_s
         """Planning sampling time (s): horizon of the speed reference."""
-        self._fzf = vehicle.mu * vehicle.Fzf
-        self._fzr = vehicle.mu * vehicle.Fzr
+        self._axles = Axles.of(vehicle, vehicle.mu)
 
     def reference(self, accel: np.ndarray, estimate: StateEstimate) -> Reference:
         """δ* and v_x* for the global acceleration ``accel`` = [v̇_X*, v̇_Y*] at ``estimate``."""
@@ -58,11 +57,11 @@ class FeedbackLinearization:
         return c * aX + s * aY, -s * aX + c * aY
 
     def _steering(self, a_y: float, estimate: StateEstimate) -> float:
-        p = self.vehicle
+        p, axles = self.vehicle, self._axles
         v_bar = max(estimate.vx, p.v_low)
         beta = estimate.vy / v_bar
         alpha_r = p.lr * estimate.gamma / v_bar - beta
-        f_front = p.m * a_y - pacejka(alpha_r, self._fzr, p.By, p.Cy)
-        alpha_f = inverse_lateral(f_front, self._fzf, p.By, p.Cy)
+        f_front = p.m * a_y - pacejka(alpha_r, axles.mu_fzr, axles.B, axles.C)
+        alpha_f = inverse_lateral(f_front, axles.mu_fzf, axles.B, axles.C)
         delta = beta + p.lf * estimate.gamma / v_bar + alpha_f
         return float(min(max(delta, -p.delta_max), p.delta_max))
