@@ -4,12 +4,14 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import casadi as ca
 import numpy as np
 import pytest
 
 from moose.params import ParamError, VehicleParams
 from moose.planner.fbl import FeedbackLinearization
 from moose.planner.kinematics import kinematic_rollout
+from moose.planner.logistic import logistic as sigma
 from moose.planner.weight import WeightFunction
 from moose.schema import FblParams, WeightParams
 from moose.signals import Blend, Obstacle, PlanResult, StateEstimate, Threat
@@ -224,6 +226,17 @@ def test_each_factor_is_the_logistic_function_of_its_scaled_distance() -> None:
     assert tau / base == pytest.approx(logistic(1.0) / logistic((50.0 - p.tau_0) / p.tau_slope), rel=1e-9)
     nu = f.weight(plan(0.0), threat(tau=50.0, nu=p.nu_0 + 2 * p.nu_slope), EST)
     assert nu / base == pytest.approx(logistic(-2.0) / logistic(p.nu_0 / p.nu_slope), rel=1e-9)
+
+
+def test_the_planners_one_logistic_is_overflow_free_and_the_same_on_floats_and_casadi() -> None:
+    # the weight's rising factors and the MPC barrier's falling sigmoid σ(−a) = 1 / (1 + e^a) are this one function
+    z_sym = ca.SX.sym("z")
+    compiled = ca.Function("sigma", [z_sym], [sigma(z_sym, ca)])
+    for z in (-30.0, -3.0, -0.5, 0.0, 0.5, 3.0, 30.0):
+        assert sigma(z) == pytest.approx(logistic(z), abs=1e-15)  # the tanh form is exact to ~1e-16, not relative
+        assert sigma(-z) == pytest.approx(1.0 - sigma(z), abs=1e-16)
+        assert float(compiled(z)) == pytest.approx(sigma(z), rel=1e-15)
+    assert sigma(-1e6) == 0.0 and sigma(1e6) == 1.0 and sigma(0.0) == 0.5  # e^z would overflow
 
 
 def test_an_unknown_tau_or_nu_gives_the_mpc_no_weight() -> None:

@@ -49,14 +49,10 @@ import numpy as np
 from ..schema import WeightParams
 from ..signals import Blend, PlanResult, StateEstimate, Threat
 from .fbl import FeedbackLinearization
+from .logistic import logistic
 
 STATUS_FACTOR = {"converged": 1.0}
 """S(status) for statuses other than ``capped`` (which uses ``capped_factor``); every other status gives 0."""
-
-
-def _sigma(z: float) -> float:
-    """Logistic function, overflow-free."""
-    return 0.5 * (1.0 + math.tanh(0.5 * z))
 
 
 class WeightFunction:
@@ -131,9 +127,9 @@ class WeightFunction:
         if threat is None or status == 0.0:
             return 0.0
         tau, nu = self.threat_reading(threat, estimate)
-        w = status * _sigma((p.rho_0 - self.steering_usage(mpc, estimate)) / p.rho_slope)
-        w *= _sigma((tau - p.tau_0) / p.tau_slope) if not math.isnan(tau) else 0.0
-        w *= _sigma((p.nu_0 - nu) / p.nu_slope) if not math.isnan(nu) else 0.0
+        w = status * logistic((p.rho_0 - self.steering_usage(mpc, estimate)) / p.rho_slope)
+        w *= logistic((tau - p.tau_0) / p.tau_slope) if not math.isnan(tau) else 0.0
+        w *= logistic((p.nu_0 - nu) / p.nu_slope) if not math.isnan(nu) else 0.0
         return float(min(max(w, 0.0), 1.0))
 
     def blend(self, mpc: Optional[PlanResult], msf: PlanResult, threat: Optional[Threat],

@@ -44,6 +44,7 @@ import numpy as np
 from ...params import G
 from ...schema import MpcParams
 from ..kinematics import kinematic_step
+from ..logistic import logistic
 
 
 def epsilon(mu: float) -> float:
@@ -67,18 +68,13 @@ def smooth_abs(x: Any, eps: float = 0.05) -> Any:
     return _out(ca.sqrt(x * x + eps * eps) - eps, x)
 
 
-def sigmoid(a: Any) -> Any:
-    """1 / (1 + e^a) in tanh form, ½ (1 − tanh(a / 2)): no overflow for any a."""
-    return _out(0.5 * (1.0 - ca.tanh(0.5 * a)), a)
-
-
 def y_safe(x_ego: Any, vX: Any, x_obs: Any, w: Any, eps: Any, v_reg: float = 0.5) -> Any:
-    """Sigmoid barrier, eq. (ysafe): w / (1 + exp((x_obs − x_ego − 4 v_X) / (ε √(w v_X²)))).
+    """Sigmoid barrier, eq. (ysafe): w / (1 + exp((x_obs − x_ego − 4 v_X) / (ε √(w v_X²)))), the logistic σ(−a).
 
     ``x_obs`` is the obstacle's near edge; √(w v_X²) is regularised as √w √(v_X² + v_reg²).
     """
     scale = eps * ca.sqrt(w) * ca.sqrt(vX * vX + v_reg * v_reg)
-    return _out(w * sigmoid((x_obs - x_ego - 4.0 * vX) / scale), x_ego, vX, x_obs, w, eps)
+    return _out(w * logistic(-(x_obs - x_ego - 4.0 * vX) / scale, ca), x_ego, vX, x_obs, w, eps)
 
 
 def barrier_gap(predicted: np.ndarray, x_near: float, x_far: float, w: float, side: float, y_path: float,
@@ -149,8 +145,9 @@ def j_return(y_tilde: Any, eps: float = 0.05) -> Any:
 
 
 def past_obstacle(x_ego: Any, x_far: Any, margin: float = 1.0) -> Any:
-    """0 before the obstacle, 1 past it: a sigmoid ½ at ``x_far + margin``, width ``margin / 4`` (not in the paper)."""
-    return _out(sigmoid((x_far + margin - x_ego) / (0.25 * margin)), x_ego, x_far)
+    """0 before the obstacle, 1 past it: the logistic of x_ego, ½ at ``x_far + margin``, width ``margin / 4`` (not in
+    the paper)."""
+    return _out(logistic((x_ego - (x_far + margin)) / (0.25 * margin), ca), x_ego, x_far)
 
 
 # ---------------------------------------------------------------------------
