@@ -11,8 +11,9 @@ from moose.observer import StateObserver
 from moose.params import VehicleParams
 from moose.schema import ObserverParams
 from moose.signals import EpsSample, StateEstimate
+from moose.state import DELTA, GAMMA, VY
 from moose.tire import Axles, lateral_forces, slip_angles
-from moose.vehicle import DELTA, GAMMA, VY, VehiclePlant, initial_state
+from moose.vehicle import VehiclePlant, initial_state
 
 P = VehicleParams()
 # (v_x, v_y, γ, δ): straight, cornering both ways, sliding, and a crawl below v_low (denominator bounded)

@@ -37,6 +37,9 @@ from .schema import ManeuverParams
 from .tire import Axles, lateral_forces
 
 ArrayLike = Union[float, np.ndarray]
+M_VY, M_GAMMA, M_THETA, M_Y = range(4)
+"""Indices of the maneuver's state [v_y, γ, θ, y] (eq. (ymax) at constant v_x)."""
+N_MANEUVER = 4
 
 
 # --- integration of eq. (ymax) -----------------------------------------------------------------
@@ -67,7 +70,7 @@ def _rates(s: Any, v: Any, delta: Any, q: Sequence[Any], ops: ModuleType) -> tup
     """
     m, izz, *tyres = q
     axles = Axles(*tyres)
-    vy, gamma, theta = s[0], s[1], s[2]
+    vy, gamma, theta = s[M_VY], s[M_GAMMA], s[M_THETA]
     fyf, fyr = lateral_forces(vy, gamma, delta, v, axles, ops)
     return ((fyf + fyr) / m - v * gamma, (fyf * axles.lf - fyr * axles.lr) / izz, gamma,
             v * ops.sin(theta) + vy * ops.cos(theta))
@@ -75,8 +78,8 @@ def _rates(s: Any, v: Any, delta: Any, q: Sequence[Any], ops: ModuleType) -> tup
 
 def _lateral_acceleration(s: Any, sdot: Any, v: Any, ops: ModuleType) -> Any:
     """ÿ = d/dt (v_x sin θ + v_y cos θ) with v_x constant."""
-    vy, gamma, theta = s[0], s[1], s[2]
-    return (v * gamma + sdot[0]) * ops.cos(theta) - vy * gamma * ops.sin(theta)
+    vy, gamma, theta = s[M_VY], s[M_GAMMA], s[M_THETA]
+    return (v * gamma + sdot[M_VY]) * ops.cos(theta) - vy * gamma * ops.sin(theta)
 
 
 def _coefficients(vehicle: VehicleParams, mu: float) -> tuple[float, ...]:
@@ -125,10 +128,10 @@ def _integrate_numpy(vehicle: VehicleParams, mu: float, v: np.ndarray, n: int, d
 
     def record(row: int, phi: float, state: np.ndarray) -> None:
         sdot = f(phi, state)
-        ys[row], thetas[row], vYs[row] = state[3], state[2], sdot[3]
+        ys[row], thetas[row], vYs[row] = state[M_Y], state[M_THETA], sdot[M_Y]
         aYs[row] = _lateral_acceleration(state, sdot, v, np)
 
-    s = np.zeros((4, v.size))
+    s = np.zeros((N_MANEUVER, v.size))
     record(0, 0.0, s)
     for i in range(n):
         phi = i * dt
@@ -162,7 +165,7 @@ def maneuver_profile(vehicle: VehicleParams, mu: float, speeds: Sequence[float] 
     if n_chunks <= 0:
         return prof
     sgn = -1.0 if side < 0 else 1.0
-    s = ca.SX.sym("s", 4)
+    s = ca.SX.sym("s", N_MANEUVER)
     vs = ca.SX.sym("v")
     q_value = np.array(_coefficients(vehicle, mu) + (sgn * vehicle.delta_max,))  # the q of _rates, then δ
     n_q = q_value.size - 1
@@ -180,17 +183,17 @@ def maneuver_profile(vehicle: VehicleParams, mu: float, speeds: Sequence[float] 
         k4 = f(x + dt * k3)
         x = x + dt / 6.0 * (k1 + 2.0 * (k2 + k3) + k4)
     xdot = f(x)
-    chunk = ca.Function("ymax_chunk", [s, vs, qs], [x, ca.vertcat(xdot[3], _lateral_acceleration(x, xdot, vs, ca))])
+    chunk = ca.Function("ymax_chunk", [s, vs, qs], [x, ca.vertcat(xdot[M_Y], _lateral_acceleration(x, xdot, vs, ca))])
     run_steps = chunk.mapaccum("ymax_steps", n_chunks, [0], [0])
-    s0, v0, q0 = ca.MX.sym("s0", 4), ca.MX.sym("v0"), ca.MX.sym("q0", n_q + 1)
+    s0, v0, q0 = ca.MX.sym("s0", N_MANEUVER), ca.MX.sym("v0"), ca.MX.sym("q0", n_q + 1)
     states_sym, rates_sym = run_steps(s0, ca.repmat(v0, 1, n_chunks), ca.repmat(q0, 1, n_chunks))
     run = ca.Function("ymax_run", [s0, v0, q0], [states_sym, rates_sym]).map("ymax_map", "serial", v.size, [2], [])
     # the map concatenates the speeds' (rows × n_chunks) blocks horizontally
     states, rates = (np.asarray(a).reshape(-1, v.size, n_chunks) for a in run(state, v.reshape(1, -1), q_value))
     ys, vYs, aYs, thetas = (np.vstack([a, np.zeros((n_chunks, v.size))])
                             for a in (prof.y, prof.vY, prof.aY, prof.theta))
-    ys[head + 1:] = states[3].T
-    thetas[head + 1:] = states[2].T
+    ys[head + 1:] = states[M_Y].T
+    thetas[head + 1:] = states[M_THETA].T
     vYs[head + 1:] = rates[0].T
     aYs[head + 1:] = rates[1].T
     return ManeuverProfile(np.arange(n_out) * (every * dt), ys, vYs, aYs, thetas)

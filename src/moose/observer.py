@@ -49,6 +49,7 @@ from .ccompile import bind, compile_function
 from .params import VehicleParams
 from .schema import ObserverParams
 from .signals import EpsSample, GpsSample, ImuSample, StateEstimate, WheelSpeedSample
+from .state import GAMMA, N_MOTION, THETA, VX, VY, X, Y
 from .tire import Axles, lateral_forces
 from .vehicle import symbolic_params, vehicle_vector
 
@@ -61,8 +62,8 @@ _FIELDS: dict[type, tuple[str, ...]] = {
 }
 _GETTERS = {kind: operator.attrgetter(*fields) for kind, fields in _FIELDS.items()}
 """The fields of each sample type, read in one call."""
-MU = 6
-"""Index of μ in the augmented state."""
+MU = N_MOTION
+"""Index of μ in the augmented state, after the plant's motion states X … GAMMA (:mod:`moose.state`)."""
 
 
 class StateObserver:
@@ -74,10 +75,10 @@ class StateObserver:
         self._mu = vehicle.mu  # the planning μ: the stack's one belief about the road
         if params.estimate_mu:
             self._mu = min(max(self._mu, params.mu_min), params.mu_max)
-        self._n = 7 if params.estimate_mu else 6
+        self._n = N_MOTION + 1 if params.estimate_mu else N_MOTION
         pv = vehicle_vector(vehicle)
         q = [params.q_position, params.q_position, params.q_yaw, params.q_vx, params.q_vy, params.q_yaw_rate]
-        q_squared = np.array(q + [params.q_mu] * (self._n - 6)) ** 2
+        q_squared = np.array(q + [params.q_mu] * (self._n - N_MOTION)) ** 2
         r_imu = np.array([params.r_yaw_rate**2, params.r_lateral_accel**2])
         # the EKF steps with this observer's constant inputs (vehicle, μ, noises) bound once
         fns = _ekf(params.estimate_mu)
@@ -93,7 +94,7 @@ class StateObserver:
         """Restart from ``estimate`` (an estimated μ restarts at the vehicle's μ); forgets the history."""
         x = [estimate.x, estimate.y, estimate.theta, estimate.vx, estimate.vy, estimate.gamma]
         std = [0.05, 0.05, 0.01, 0.2, 0.2, 0.05]
-        if self._n == 7:
+        if self._n > MU:
             x.append(self._mu)
             std.append(self.params.mu_std0)
         self._x = np.array(x, dtype=float)
@@ -105,13 +106,13 @@ class StateObserver:
 
     def estimate(self) -> StateEstimate:
         """The estimate at the time of the last sample."""
-        x = self._x[:6].tolist()  # Python floats, as float() of each entry
-        return StateEstimate(self._t, x[0], x[1], x[2], x[3], x[4], x[5], float(self._delta))
+        x = self._x.tolist()  # Python floats, as float() of each entry
+        return StateEstimate(self._t, x[X], x[Y], x[THETA], x[VX], x[VY], x[GAMMA], float(self._delta))
 
     @property
     def mu_estimate(self) -> float:
         """The friction coefficient of the tyre model: estimated with ``estimate_mu``, else the vehicle's μ."""
-        return float(self._x[MU]) if self._n == 7 else self._mu
+        return float(self._x[MU]) if self._n > MU else self._mu
 
     @property
     def covariance(self) -> np.ndarray:
@@ -127,7 +128,7 @@ class StateObserver:
 
     def _bound_mu(self) -> None:
         """Keep an estimated μ in [mu_min, mu_max] (projection; x̂ is replaced, never modified in place)."""
-        if self._n == 7 and not self.params.mu_min <= self._x[MU] <= self.params.mu_max:
+        if self._n > MU and not self.params.mu_min <= self._x[MU] <= self.params.mu_max:
             x = self._x.copy()
             x[MU] = min(max(x[MU], self.params.mu_min), self.params.mu_max)
             self._x = x
@@ -254,13 +255,13 @@ class StateObserver:
 
     def _gps_correct(self, fix: GpsSample) -> None:
         x = self._x
-        theta, vx, vy = x[2], x[3], x[4]
+        theta, vx, vy = x[THETA], x[VX], x[VY]
         c, s = math.cos(theta), math.sin(theta)
         H = np.zeros((4, self._n))
-        H[0, 0] = H[1, 1] = 1.0
-        H[2, 2], H[2, 3], H[2, 4] = -vx * s - vy * c, c, -s
-        H[3, 2], H[3, 3], H[3, 4] = vx * c - vy * s, s, c
-        h = np.array([x[0], x[1], vx * c - vy * s, vx * s + vy * c])
+        H[0, X] = H[1, Y] = 1.0
+        H[2, THETA], H[2, VX], H[2, VY] = -vx * s - vy * c, c, -s
+        H[3, THETA], H[3, VX], H[3, VY] = vx * c - vy * s, s, c
+        h = np.array([x[X], x[Y], vx * c - vy * s, vx * s + vy * c])
         z = np.array([fix.x, fix.y, fix.vX, fix.vY])
         self._correct(H, z - h, self._r_gps)
         self._bound_mu()
@@ -331,14 +332,14 @@ def _ekf(estimate_mu: bool = False) -> dict[str, Any]:
     ``estimate_mu`` the state has a seventh entry μ (μ̇ = 0 plus process noise) and the
     ``mu`` argument is unused.
     """
-    n = 7 if estimate_mu else 6
+    n = N_MOTION + 1 if estimate_mu else N_MOTION
     x = ca.SX.sym("x", n)
     P = ca.SX.sym("P", n, n)
     ax, delta, dt, mu_in = ca.SX.sym("ax"), ca.SX.sym("delta"), ca.SX.sym("dt"), ca.SX.sym("mu")
     z_gamma, z_ay = ca.SX.sym("z_gamma"), ca.SX.sym("z_ay")
     q, r = ca.SX.sym("q", n), ca.SX.sym("r", 2)
     pv, p = symbolic_params()
-    theta, vx, vy, gamma = x[2], x[3], x[4], x[5]
+    theta, vx, vy, gamma = x[THETA], x[VX], x[VY], x[GAMMA]
     mu = x[MU] if estimate_mu else mu_in
     v_bar = ca.fmax(vx, p.v_low)
     fyf, fyr = lateral_forces(vy, gamma, delta, v_bar, Axles.of(p, mu), ops=ca)
@@ -355,10 +356,10 @@ def _ekf(estimate_mu: bool = False) -> dict[str, Any]:
     h_ay = ca.Function("h_ay", [x, delta, pv, mu_in], [lateral])
     H_ay = ca.jacobian(lateral, x)
     e_gamma = ca.DM.zeros(1, n)
-    e_gamma[0, 5] = 1.0
+    e_gamma[0, GAMMA] = 1.0
     xs, Ps = x_pred, P_pred
     for H, innovation, noise in (
-        (e_gamma, z_gamma - x_pred[5], r[0]),
+        (e_gamma, z_gamma - x_pred[GAMMA], r[0]),
         (ca.substitute(H_ay, x, x_pred), z_ay - h_ay(x_pred, delta, pv, mu_in), r[1]),
     ):
         PHt = Ps @ H.T
@@ -369,9 +370,9 @@ def _ekf(estimate_mu: bool = False) -> dict[str, Any]:
                       [xs, 0.5 * (Ps + Ps.T)])
     # the wheel-speed update: H = e_vx, a scalar Kalman update (gain = P e_vx / (P_vx,vx + r))
     z_v, r_v = ca.SX.sym("z_v"), ca.SX.sym("r_v")
-    PHt = P[:, 3]
-    gain = PHt / (PHt[3] + r_v)
-    wheel = ca.Function(f"{prefix}_wheel", [x, P, z_v, r_v], [x + gain * (z_v - x[3]), P - ca.mtimes(gain, PHt.T)])
+    PHt = P[:, VX]
+    gain = PHt / (PHt[VX] + r_v)
+    wheel = ca.Function(f"{prefix}_wheel", [x, P, z_v, r_v], [x + gain * (z_v - x[VX]), P - ca.mtimes(gain, PHt.T)])
     steps = {"predict": predict, "imu": imu, "wheel": wheel}
     if not estimate_mu:  # (with μ estimated, μ is projected onto its bounds between the two updates)
         steps["imu_wheel"] = _imu_then_wheel(imu, wheel, f"{prefix}_imu_wheel")

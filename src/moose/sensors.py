@@ -35,7 +35,7 @@ import numpy as np
 from .params import VehicleParams
 from .schema import SensorParams
 from .signals import EpsSample, GpsSample, ImuSample, WheelSpeedSample
-from .vehicle import DELTA, GAMMA, OMEGA_RL, OMEGA_RR, THETA, VX, VY, X, Y
+from .state import DELTA, GAMMA, OMEGA_RL, OMEGA_RR, THETA, VX, VY, X, Y
 
 Sample = Union[ImuSample, GpsSample, WheelSpeedSample, EpsSample]
 

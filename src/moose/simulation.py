@@ -31,6 +31,7 @@ from .scenario import Scenario
 from .schema import Config, PlannerMode
 from .sensors import Sensors
 from .signals import EpsSample, Obstacle, Reference, StateEstimate, Threat
+from .state import DELTA, GAMMA, OMEGA_RL, OMEGA_RR, STEER_RATE, THETA, VX, VY, X, Y
 from .timing import CommandHold, DelayLine, SteeringPredictor
 from .vehicle import VehiclePlant, initial_state
 
@@ -144,7 +145,7 @@ class ClosedLoop:
             estimate = estimate_now()
             estimates.append(estimate)
             true = state.tolist()
-            appeared = appeared or self.scenario.appears(true[0], true[3])
+            appeared = appeared or self.scenario.appears(true[X], true[VX])
             previous = threat
             threat = detect(t, estimate, seen if appeared else unseen)
             threats.append((t, threat))
@@ -161,11 +162,12 @@ class ClosedLoop:
                 command = control(reference, estimate, delta_meas, dt_motion)
             else:  # the EPS loop closes on the angle its command will meet (timing.compensate)
                 command = control(reference, estimate, eps.predict(delta_meas, delta_stamp, t), dt_motion)
-                eps.record(t, float(command[0]))
+                eps.record(t, float(command[STEER_RATE]))
             actuate(t, command)
             u = act(t)
             rows.append((
-                t, *true[:6], true[8], true[6], true[7],
+                t, true[X], true[Y], true[THETA], true[VX], true[VY], true[GAMMA],
+                true[DELTA], true[OMEGA_RL], true[OMEGA_RR],
                 estimate.x, estimate.y, estimate.theta, estimate.vx, estimate.vy, estimate.gamma,
                 reference.delta, acting.delta_mpc if acting is not None else 0.0, reference.vx,
                 acting.blend.weight_mpc if acting is not None else math.nan, *u.tolist(), float(threat is not None),
@@ -182,8 +184,8 @@ class ClosedLoop:
 def _estimate_of(t: float, state: np.ndarray) -> StateEstimate:
     """The true state as an estimate: the observer's initial condition (the car starts surveyed)."""
     return StateEstimate(
-        t=t, x=float(state[0]), y=float(state[1]), theta=float(state[2]), vx=float(state[3]),
-        vy=float(state[4]), gamma=float(state[5]), delta=float(state[8]),
+        t=t, x=float(state[X]), y=float(state[Y]), theta=float(state[THETA]), vx=float(state[VX]),
+        vy=float(state[VY]), gamma=float(state[GAMMA]), delta=float(state[DELTA]),
     )
 
 

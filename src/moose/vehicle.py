@@ -3,7 +3,7 @@
 State ``X = [x, y, θ, v_x, v_y, γ, ω_rl, ω_rr, δ]`` (global position and yaw,
 body velocities and yaw rate, rear wheel speeds, steering angle); input
 ``U = [δ̇_cmd, T_rl, T_rr]`` (EPS motor rate command, rear in-wheel motor
-torques).
+torques); their indices are named in :mod:`moose.state`.
 
 * Forces: eq. (eom) with the steering angle kept (the plant does not make the
   small-angle simplification of eq. (eomdyn)); front wheels undriven and
@@ -46,12 +46,24 @@ import numpy as np
 
 from .ccompile import CompiledFunction, bind, compile_function
 from .params import ParamError, VehicleParams
+from .state import (
+    DELTA,
+    GAMMA,
+    N_INPUT,
+    N_STATE,
+    OMEGA_RL,
+    OMEGA_RR,
+    STEER_RATE,
+    THETA,
+    TORQUE_RL,
+    TORQUE_RR,
+    VX,
+    VY,
+    X,
+    Y,
+)
 from .tire import Axles, lateral_forces, pacejka
 
-X, Y, THETA, VX, VY, GAMMA, OMEGA_RL, OMEGA_RR, DELTA = range(9)
-"""Indices of the plant state vector."""
-N_STATE = 9
-N_INPUT = 3
 RK4_STABILITY = 2.785
 """RK4's stability limit on the negative real axis, |λ dt| < 2.785."""
 
@@ -60,9 +72,9 @@ def dynamics(state: Any, u: Any, p: VehicleParams) -> tuple[Any, Any]:
     """State derivative and IMU specific force [a_x, a_y] (CasADi expressions), eqs. (trajdef), (eom), (fy)."""
     theta, vx, vy, gamma = state[THETA], state[VX], state[VY], state[GAMMA]
     omega_rl, omega_rr, delta = state[OMEGA_RL], state[OMEGA_RR], state[DELTA]
-    rate_cmd = ca.fmin(ca.fmax(u[0], -p.delta_rate_max), p.delta_rate_max)
-    t_rl = ca.fmin(ca.fmax(u[1], -p.T_max), p.T_max)
-    t_rr = ca.fmin(ca.fmax(u[2], -p.T_max), p.T_max)
+    rate_cmd = ca.fmin(ca.fmax(u[STEER_RATE], -p.delta_rate_max), p.delta_rate_max)
+    t_rl = ca.fmin(ca.fmax(u[TORQUE_RL], -p.T_max), p.T_max)
+    t_rr = ca.fmin(ca.fmax(u[TORQUE_RR], -p.T_max), p.T_max)
     v_bar = ca.fmax(vx, p.v_low)
     fyf, fyr = lateral_forces(vy, gamma, delta, v_bar, Axles.of(p, p.mu), ops=ca)  # bounded denominators
     # rear longitudinal slip and force per wheel
@@ -139,7 +151,7 @@ def _functions() -> tuple[ca.Function, ca.Function, dict[int, ca.Function | Comp
     xdot, force = dynamics(s, u, p)
     f = ca.Function("f", [s, u, pv], [xdot, force])
     # the steering angle is piecewise linear in time: exact inside the step
-    rate = ca.fmin(ca.fmax(u[0], -p.delta_rate_max), p.delta_rate_max)
+    rate = ca.fmin(ca.fmax(u[STEER_RATE], -p.delta_rate_max), p.delta_rate_max)
 
     def delta_at(c: float) -> ca.SX:
         return ca.fmin(ca.fmax(s[DELTA] + rate * (c * dt), -p.delta_max), p.delta_max)

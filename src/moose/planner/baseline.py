@@ -71,7 +71,7 @@ class AebPlanner(MsfPlanner):
         g, est = self.grid, inp.estimate
         state = np.array([est.x, est.y, est.vX, est.vY], dtype=float)
         accel = np.zeros((g.N_p, 2))
-        vX, vY = float(state[2]), float(state[3])
+        vX, vY = est.vX, est.vY
         for k in range(g.N_p):
             speed = math.hypot(vX, vY)
             if speed < 1e-9:

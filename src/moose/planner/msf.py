@@ -336,7 +336,7 @@ class MsfPlanner:
         state = np.array([est.x, est.y, est.vX, est.vY], dtype=float)
         accel = np.zeros((g.N_p, 2))
         ts = g.t_s
-        y, vX, vY = float(est.y), float(state[2]), float(state[3])
+        y, vX, vY = float(est.y), est.vX, est.vY
         for k in range(g.N_p):
             s = inp.t + k * ts
             if evasion is not None:

@@ -34,6 +34,7 @@ from moose.signals import (
     Threat,
     WheelSpeedSample,
 )
+from moose.state import GAMMA, STEER_RATE, THETA, TORQUE_RL, TORQUE_RR, VX, VY, X, Y
 
 from .graph import (
     ACTUATOR_COMMAND,
@@ -371,18 +372,18 @@ def odometry_to_msg(node: Any, t: float, state: np.ndarray) -> Any:
     msg = node.make("nav_msgs/msg/Odometry")
     stamp(msg, t, FRAME_ODOM)
     msg.child_frame_id = FRAME_TRUTH
-    msg.pose.pose.position.x, msg.pose.pose.position.y = float(state[0]), float(state[1])
-    _yaw(msg.pose.pose.orientation, float(state[2]))
-    msg.twist.twist.linear.x, msg.twist.twist.linear.y = float(state[3]), float(state[4])
-    msg.twist.twist.angular.z = float(state[5])
+    msg.pose.pose.position.x, msg.pose.pose.position.y = float(state[X]), float(state[Y])
+    _yaw(msg.pose.pose.orientation, float(state[THETA]))
+    msg.twist.twist.linear.x, msg.twist.twist.linear.y = float(state[VX]), float(state[VY])
+    msg.twist.twist.angular.z = float(state[GAMMA])
     return msg
 
 
 def actuator_to_msg(node: Any, t: float, reference: Reference, u: Union[np.ndarray, Sequence[float]]) -> Any:
     msg = node.make("moose_msgs/msg/ActuatorCommand")
     stamp(msg, t, FRAME_BASE)
-    msg.steering_angle, msg.steering_rate = reference.delta, float(u[0])
-    msg.torque_rl, msg.torque_rr = float(u[1]), float(u[2])
+    msg.steering_angle, msg.steering_rate = reference.delta, float(u[STEER_RATE])
+    msg.torque_rl, msg.torque_rr = float(u[TORQUE_RL]), float(u[TORQUE_RR])
     return msg
 
 
@@ -429,8 +430,8 @@ def estimate_tf(node: Any, e: StateEstimate) -> Any:
 def truth_tf(node: Any, t: float, state: np.ndarray) -> Any:
     """``/tf``: odom → base_link_truth, the simulator's ground truth (plant state [x, y, θ, …])."""
     msg = node.make("tf2_msgs/msg/TFMessage")
-    msg.transforms = [_transform(node, t, FRAME_ODOM, FRAME_TRUTH, float(state[0]), float(state[1]),
-                                 theta=float(state[2]))]
+    msg.transforms = [_transform(node, t, FRAME_ODOM, FRAME_TRUTH, float(state[X]), float(state[Y]),
+                                 theta=float(state[THETA]))]
     return msg
 
 

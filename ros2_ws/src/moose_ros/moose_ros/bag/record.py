@@ -92,6 +92,7 @@ def record_result(result: Any, path: str | Path) -> dict[str, int]:
 
     from moose.planner.step import blend_path
     from moose.signals import Reference
+    from moose.state import INPUT_NAMES, N_MOTION, STATE_NAMES
 
     from .. import convert as cv
     from ..interfaces import make
@@ -111,12 +112,12 @@ def record_result(result: Any, path: str | Path) -> dict[str, int]:
         clock = make(CLOCK.type)
         clock.clock.sec, clock.clock.nanosec = divmod(int(round(t * 1e9)), 1_000_000_000)
         add(t, CLOCK.name, clock)
-        state = np.array([trace[c][k] for c in ("x", "y", "theta", "vx", "vy", "gamma")])
+        state = np.array([trace[name][k] for name in STATE_NAMES[:N_MOTION]])
         add(t, ODOM.name, cv.odometry_to_msg(factory, t, state))
         add(t, TF.name, cv.truth_tf(factory, t, state))
         reference = Reference(float(trace["delta_ref"][k]), float(trace["vx_ref"][k]))
         add(t, REFERENCE.name, cv.reference_to_msg(factory, t, reference))
-        u = np.array([trace["u_delta_rate"][k], trace["u_T_rl"][k], trace["u_T_rr"][k]])
+        u = np.array([trace[name][k] for name in INPUT_NAMES])
         add(t, ACTUATOR_COMMAND.name, cv.actuator_to_msg(factory, t, reference, u))
     # logged when the stack had them (moose.timing): a sample reaches the observer timing.sensor_delay_s after the
     # sensors handed it over, an estimate is published at its tick; each keeps its own stamp in its header

@@ -7,6 +7,7 @@ from typing import Any, Optional
 from moose.minimum_risk import ActuatorLimits, Command, MinimumRiskManeuver
 from moose.motion import MotionController
 from moose.signals import Reference, StateEstimate
+from moose.state import STEER_RATE, TORQUE_RL, TORQUE_RR
 
 from .. import convert as cv
 from ..graph import (
@@ -85,7 +86,7 @@ class Motion(GraphNode):
             return
         reference = self.reference or Reference(0.0, estimate.vx)
         u = self.controller.step(reference, estimate, self.delta, self.dt)
-        self.last = Command(reference.delta, float(u[0]), float(u[1]), float(u[2]))
+        self.last = Command(reference.delta, float(u[STEER_RATE]), float(u[TORQUE_RL]), float(u[TORQUE_RR]))
         self.pub(cv.actuator_to_msg(self.rt, estimate.t, reference, u))
 
     def on_inputs(self, stale: dict[str, Optional[float]], now: float) -> None:

@@ -6,6 +6,7 @@ from typing import Any, Optional
 
 from moose.observer import StateObserver
 from moose.signals import StateEstimate
+from moose.state import X
 from moose.vehicle import initial_state
 
 from .. import convert as cv
@@ -23,7 +24,7 @@ class Observer(GraphNode):
         scenario = self.params.load_scenario()
         start = initial_state(self.config.vehicle, x=scenario.start_x, vx=scenario.v_init)
         self.observer = StateObserver(self.config.observer, self.config.model_vehicle,
-                                      StateEstimate(0.0, start[0], 0.0, 0.0, scenario.v_init, 0.0, 0.0, 0.0))
+                                      StateEstimate(0.0, start[X], 0.0, 0.0, scenario.v_init, 0.0, 0.0, 0.0))
         self.pub = STATE.publisher(rt)
         self.pub_tf = TF.publisher(rt)
         self.dropped = 0

@@ -11,6 +11,7 @@ from moose.canbus.safety import CommandGuard, GuardParams, GuardState
 from moose.minimum_risk import ActuatorLimits, Command, MinimumRiskManeuver
 from moose.sensors import Sensors
 from moose.signals import ActuatorCommand, EpsSample, WheelSpeedSample
+from moose.state import VX, X, Y
 from moose.vehicle import VehiclePlant, initial_state
 
 from .. import convert as cv
@@ -160,10 +161,10 @@ class VehicleSimulator(GraphNode):
             self.io.send(sample, t)
         self.pub["odom"](cv.odometry_to_msg(rt, t, state))
         self.pub["tf"](cv.truth_tf(rt, t, state))
-        if not self.appeared and self.scenario.appears(float(state[0]), float(state[3])):
+        if not self.appeared and self.scenario.appears(float(state[X]), float(state[VX])):
             self.appeared = True
             self.pub["obstacles"](cv.obstacles_to_msg(rt, t, [self.scenario.danger_zone]))
-        self.values = {"t": f"{t:.2f}", "x": f"{state[0]:.2f}", "y": f"{state[1]:.2f}"}
+        self.values = {"t": f"{t:.2f}", "x": f"{state[X]:.2f}", "y": f"{state[Y]:.2f}"}
         if t >= self.end - 1e-9:
             self.finished = True
             self.message = "finished"
