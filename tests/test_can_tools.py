@@ -87,6 +87,30 @@ def test_unknown_suffixes_and_missing_files_are_param_errors(tmp_path, bus) -> N
             replay(good, bus, rate=rate)
 
 
+@pytest.mark.parametrize("suffix", [".asc", ".log", ".csv", ".trc", ".asc.gz"])
+def test_a_log_without_frames_is_a_param_error_naming_it(tmp_path, bus, suffix: str) -> None:
+    empty = tmp_path / f"empty{suffix}"
+    empty.write_bytes(gzip.compress(b"") if suffix.endswith(".gz") else b"")
+    with pytest.raises(ParamError, match=rf"log '.*empty{re.escape(suffix)}' holds no CAN frames to replay"):
+        replay(empty, bus)
+    errors_only = tmp_path / "errors.log"  # error frames are skipped: nothing is left to send
+    errors_only.write_text("(1.000000) vcan0 20000080#0000000000000000\n")
+    with pytest.raises(ParamError, match=r"errors\.log' holds no CAN frames"):
+        replay(errors_only, bus)
+
+
+def test_moose_can_replay_of_a_log_without_frames_exits_2_naming_it(tmp_path) -> None:
+    import subprocess
+    import sys
+
+    empty = tmp_path / "quiet.asc"
+    empty.write_text("")
+    done = subprocess.run([sys.executable, "-m", "moose.cli", "can", "replay", str(empty), "--interface", "virtual",
+                           "--channel", CHANNEL], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and done.stdout == "", (done.stdout, done.stderr)
+    assert done.stderr.startswith("moose: error: log ") and "quiet.asc' holds no CAN frames" in done.stderr
+
+
 def test_a_gzip_log_replays(tmp_path, bus) -> None:
     plain = tmp_path / "traffic.log"
     good_log(plain)

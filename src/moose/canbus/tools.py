@@ -2,8 +2,8 @@
 
 Every bad input is a :class:`~moose.params.ParamError` naming the field or file and the value:
 an interface, channel or port (:func:`open_tool_bus`), a log's path, suffix or content
-(:func:`read_log`: a corrupt file is found before the first frame is sent), a rate, count or
-duration.
+(:func:`read_log`: a corrupt file is found before the first frame is sent), a log without frames
+(:func:`replay`), a rate, count or duration.
 """
 from __future__ import annotations
 
@@ -104,11 +104,12 @@ def read_log(path: str | Path) -> Iterator[can.Message]:
 def replay(path: str | Path, bus: can.BusABC, rate: float = 1.0) -> int:
     """Send the frames of a python-can log with their timing (``rate``: speed-up); returns the count.
 
-    The whole log is read once before the first frame is sent, so a corrupt file sends nothing.
+    The whole log is read once before the first frame is sent, so a corrupt file sends nothing; a log
+    without a frame to send (empty, or error frames only) is a ParamError naming it, not "sent 0 frames".
     """
     check("rate", rate, _positive_finite, "a positive, finite speed-up")
-    for _ in read_log(path):  # validate first
-        pass
+    if sum(1 for _ in read_log(path)) == 0:  # reads (validates) the whole log before the first frame is sent
+        raise ParamError(f"log {str(path)!r} holds no CAN frames to replay (error frames aside)")
     sent = 0
     first: Optional[float] = None
     start = time.monotonic()
