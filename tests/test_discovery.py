@@ -5,6 +5,9 @@ these tests pin the mapping itself (rmw_cyclonedds' check_create_domain, Jazzy) 
 """
 from __future__ import annotations
 
+import ast
+import os
+import shlex
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -95,12 +98,73 @@ def test_ros_environment_gives_ros2_tools_the_same_settings() -> None:
     again = Discovery.from_environ(env)  # idempotent: the binding is not added twice
     assert "CYCLONEDDS_URI" not in again.ros_environment() and not again.cyclone_loopback  # left as it is
     assert again.cyclone_config().count("NetworkInterface") == 1
-    subnet = Discovery.from_environ({"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}).ros_environment()
-    assert subnet == {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}
+    subnet = Discovery.from_environ({"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET", "ROS_STATIC_PEERS": "10.0.0.7"})
+    assert subnet.ros_environment() == {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET", "ROS_STATIC_PEERS": "10.0.0.7",
+                                        "CYCLONEDDS_URI": subnet.fragment()}  # the peers for a plain tool too
+    off = Discovery.from_environ({"ROS_AUTOMATIC_DISCOVERY_RANGE": "OFF"}).ros_environment()
+    assert off == {"ROS_AUTOMATIC_DISCOVERY_RANGE": "OFF"}  # nothing outside a process sees its graph
+    mine = Discovery.from_environ({"CYCLONEDDS_URI": LO_XML})  # the user's interface: no loopback binding added
+    assert mine.ros_environment()["CYCLONEDDS_URI"] == mine.fragment() + "," + LO_XML
+    assert "CYCLONEDDS_URI" not in Discovery.from_environ(mine.ros_environment()).ros_environment()
     out = subprocess.run([sys.executable, "-m", "moose_ros.runtime"], capture_output=True, text=True, timeout=60,
                          env={"PATH": "/usr/bin:/bin"})
     assert out.returncode == 0 and out.stderr == ""
     assert out.stdout.splitlines()[0] == "export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST"
+
+
+PROBE_NODE = """
+import sys
+from moose_ros.runtime import DdsNode
+rt = DdsNode("discovery_probe")
+rt.publisher("rosgraph_msgs/msg/Clock", "/probe_clock")
+print("ready", flush=True)
+sys.stdin.read()  # until the test closes stdin
+rt.shutdown()
+"""
+PLAIN_READER = """
+import sys, time
+from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication
+from cyclonedds.domain import DomainParticipant
+participant = DomainParticipant(int(sys.argv[1]))  # kept: the reader dies with it
+reader = BuiltinDataReader(participant, BuiltinTopicDcpsPublication)
+seen, deadline = set(), time.monotonic() + 30.0
+while "rt/probe_clock" not in seen and time.monotonic() < deadline:
+    seen.update(sample.topic_name for sample in reader.take(N=100))
+    time.sleep(0.05)
+print(sorted(seen))
+"""
+
+
+def test_a_plain_cyclone_dds_participant_with_the_printed_settings_discovers_a_running_node() -> None:
+    """``eval "$(python -m moose_ros.runtime)"`` is all a plain Cyclone DDS tool needs to see a graph confined to this
+    host: a cyclonedds-python participant (no rmw_cyclonedds to add the range's settings) finds a node's writer."""
+    clean = {k: v for k, v in os.environ.items()
+             if k not in ("CYCLONEDDS_URI", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_STATIC_PEERS", "ROS_LOCALHOST_ONLY")}
+    clean.update(ROS_DOMAIN_ID=str(claim_domain()), MOOSE_RUNTIME="dds")  # the default: LOCALHOST, on loopback
+    printed = subprocess.run([sys.executable, "-m", "moose_ros.runtime"], env=clean, capture_output=True, text=True,
+                             timeout=60)
+    assert printed.returncode == 0, printed.stderr
+    tool = dict(clean)
+    for line in printed.stdout.splitlines():
+        export, assignment = shlex.split(line)
+        key, value = assignment.split("=", 1)
+        assert export == "export"
+        tool[key] = value
+    node = subprocess.Popen([sys.executable, "-c", PROBE_NODE], env=clean, stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, text=True)
+    try:
+        assert node.stdout is not None and node.stdout.readline().strip() == "ready"
+        seen = subprocess.run([sys.executable, "-c", PLAIN_READER, clean["ROS_DOMAIN_ID"]], env=tool,
+                              capture_output=True, text=True, timeout=90)
+        assert "rt/probe_clock" in ast.literal_eval(seen.stdout.strip() or "[]"), seen.stderr
+    finally:
+        assert node.stdin is not None
+        node.stdin.close()
+        try:
+            node.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            node.kill()
+            node.wait()
 
 
 def test_the_generated_configuration_is_accepted_by_cyclone_dds() -> None:

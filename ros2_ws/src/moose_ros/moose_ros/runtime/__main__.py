@@ -1,8 +1,9 @@
 """``python -m moose_ros.runtime``: print this environment's DDS discovery settings as shell ``export`` lines.
 
-For ROS 2 tools (``ros2 topic echo``, ``ros2 bag record``) that should see a graph confined to this host:
-``eval "$(python -m moose_ros.runtime)"`` gives them the range and, for rmw_cyclonedds, the loopback
-binding of :mod:`moose_ros.runtime.discovery`.
+For ROS 2 tools (``ros2 topic echo``, ``ros2 bag record``) and plain Cyclone DDS tools (``cyclonedds ls``,
+cyclonedds-python) that should see a graph confined to this host: ``eval "$(python -m moose_ros.runtime)"`` gives
+them the range and the Cyclone DDS settings of :mod:`moose_ros.runtime.discovery` (loopback, multicast off,
+127.0.0.1 as a peer), which rmw_cyclonedds would add for the range but a plain Cyclone DDS participant would not.
 """
 import shlex
 import sys

@@ -45,8 +45,10 @@ profile of the user's (``FASTRTPS_DEFAULT_PROFILES_FILE``) for rmw_fastrtps.
 The Cyclone DDS backend passes :meth:`Discovery.cyclone_config` to its domain; the rclpy backend sets
 :meth:`Discovery.rclpy_environment` while it initialises rclpy and creates its node, and checks afterwards
 that Fast DDS bound no new socket elsewhere (:func:`udp_bindings`).  ``python -m moose_ros.runtime`` prints
-:meth:`Discovery.ros_environment` as shell ``export`` lines, for ROS 2 tools (``ros2 topic echo``) that
-should see a confined graph (the tool itself then has ROS 2's ``LOCALHOST``, not the loopback binding).
+:meth:`Discovery.ros_environment` as shell ``export`` lines, for ROS 2 tools (``ros2 topic echo``) and plain
+Cyclone DDS tools (``cyclonedds ls``) that should see a confined graph: the range, and the range's Cyclone DDS
+settings in ``CYCLONEDDS_URI`` (a plain Cyclone DDS participant has no rmw_cyclonedds to add them; Fast DDS
+tools keep ROS 2's ``LOCALHOST``, not the loopback binding).
 """
 from __future__ import annotations
 
@@ -163,15 +165,20 @@ class Discovery:
         return ",".join(parts) if parts else None
 
     def ros_environment(self) -> dict[str, str]:
-        """The environment a ROS 2 tool (``ros2 topic echo``) needs to see a graph with these settings: the range,
-        and ``CYCLONEDDS_URI`` with the loopback binding in front of the user's (rmw_cyclonedds reads it after its
-        own fragment for the range; other RMWs ignore it)."""
+        """The environment a tool needs to see a graph with these settings: the range for a ROS 2 tool (``ros2 topic
+        echo``), and ``CYCLONEDDS_URI`` with the range's whole fragment (the loopback binding, multicast off and
+        127.0.0.1 as a peer for ``LOCALHOST``) in front of the user's, so that a plain Cyclone DDS participant
+        (``cyclonedds ls``, cyclonedds-python) has the settings a node has.  rmw_cyclonedds reads the URI after its
+        own fragment for the range, which says the same again; other RMWs ignore it.  ``OFF`` gets no fragment
+        (nothing outside a process sees its graph), and neither does a URI that starts with this range's fragment
+        already (an environment made by this method: printing it again changes nothing)."""
         env = {"ROS_AUTOMATIC_DISCOVERY_RANGE": self.range}
         if self.static_peers:
             env["ROS_STATIC_PEERS"] = ";".join(self.static_peers)
-        if self.cyclone_loopback:
-            loopback = f"<CycloneDDS><Domain>{self._loopback()}</Domain></CycloneDDS>"
-            env["CYCLONEDDS_URI"] = ",".join(p for p in (loopback, self.user_uri) if p)
+        fragment = self.fragment() if self.range != "OFF" else ""
+        printed = (fragment, dataclasses.replace(self, user_uri="").fragment())  # ours, as this URI or none made it
+        if fragment and not self.user_uri.startswith(printed):
+            env["CYCLONEDDS_URI"] = ",".join(p for p in (fragment, self.user_uri) if p)
         return env
 
     def rclpy_environment(self) -> dict[str, str]:
