@@ -51,6 +51,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/bench_graph.py
 	$(BIN)/python bench/bench_memory.py
 	$(BIN)/python bench/bench_sweep.py
+	$(BIN)/python bench/bench_sweep_per_core.py
 
 # the shipped criticality map of the paper region (README, docs/design.md): ~2,700 cases, a few minutes on 2 cores
 MAP := docs/maps/paper_region
