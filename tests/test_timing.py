@@ -25,7 +25,10 @@ from moose.timing import (
     CommandHold,
     DelayLine,
     SteeringPredictor,
+    car_hops,
+    dbc_hops,
     describe,
+    hops_cache_path,
     predict,
     profile,
 )
@@ -69,6 +72,24 @@ def test_the_car_profile_is_the_dbc_s_chain() -> None:
         "command_delay_s": car.command_delay_s, "compensate": True}
     with pytest.raises(ValueError, match="timing profile 'fast' is unknown"):
         profile("fast")
+
+
+def test_the_cached_can_hops_are_the_dbc_s_bit_for_bit_and_a_bad_entry_is_read_again(
+        tmp_path: Any, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The hops a node reads from the machine's cache (without loading cantools) are the DBC's; an entry that is not
+    what this code writes (truncated, edited, of another shape) is read from the DBC again and replaced."""
+    monkeypatch.setenv("MOOSE_CACHE_DIR", str(tmp_path))
+    path = hops_cache_path()
+    assert path.parent == tmp_path / "timing" and not path.exists()
+    fresh = dbc_hops()
+    assert car_hops() == fresh and path.is_file()  # written on the first read
+    assert car_hops() == fresh  # and read back as the same floats
+    for bad in ('{"sensors": ', '{"sensors": {"frames": ["IMU"], "period_s": 0.01, "wire_s": 0.0003}}',
+                path.read_text().replace("0.01", "-0.01", 1), path.read_text().replace("0.01", '"0.01"', 1)):
+        path.write_text(bad)
+        assert car_hops() == fresh and path.read_text() != bad
+    monkeypatch.setenv("MOOSE_CACHE_DIR", "/proc/moose-cannot-write-here")
+    assert car_hops() == fresh  # an unwritable cache costs the parser, nothing else
 
 
 @pytest.mark.parametrize("key, value, expected", [

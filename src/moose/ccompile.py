@@ -25,14 +25,12 @@ from typing import Any, Callable, Optional, Sequence
 import casadi as ca
 import numpy as np
 
+from .resources import cache_dir
+
 _P = ctypes.POINTER(ctypes.c_double)
 FLAGS = ("-O2", "-ffp-contract=off", "-shared", "-fPIC")
 """Compiler flags: no fused multiply-add contraction, so that a function called by another (the observer's
 fused tick, the plant's chunks) computes bit for bit what it computes alone, on every architecture."""
-
-
-def cache_dir() -> Path:
-    return Path(os.environ.get("MOOSE_CACHE_DIR", Path.home() / ".cache" / "moose"))
 
 
 class CompiledFunction:

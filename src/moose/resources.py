@@ -1,10 +1,12 @@
-"""Data files shipped inside the package (``moose/data``; the repository's ``config/`` links there).
+"""Data files shipped inside the package (``moose/data``; the repository's ``config/`` links there), and the
+folder where what is derived from them and from the code is cached (:func:`cache_dir`).
 
 They are found with :mod:`importlib.resources`, so an installed wheel finds them as a source
 checkout does: the default parameter file, the scenarios and the vehicle bus's DBC.
 """
 from __future__ import annotations
 
+import os
 from importlib.resources import files
 from pathlib import Path
 
@@ -26,3 +28,10 @@ SCENARIO_DIR = DATA_DIR / "scenarios"
 """The shipped scenarios (the paper's experiments)."""
 DBC_FILE = DATA_DIR / "kanon.dbc"
 """The FPEV2-Kanon vehicle bus (500 kbit/s)."""
+
+
+def cache_dir() -> Path:
+    """The machine's cache (``$MOOSE_CACHE_DIR``, default ``~/.cache/moose``): compiled CasADi functions
+    (:mod:`moose.ccompile`), maneuver tables (:mod:`moose.maneuver`), the car's CAN hops (:mod:`moose.timing`).
+    Each entry's name carries a hash of everything that decides it, so a changed input never finds another's."""
+    return Path(os.environ.get("MOOSE_CACHE_DIR", Path.home() / ".cache" / "moose"))

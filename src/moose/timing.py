@@ -31,14 +31,21 @@ initial state through its buffer of commands over ``input_delay``.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import importlib.metadata
+import json
 import math
+import os
+import tempfile
 from collections import deque
 from functools import lru_cache
+from pathlib import Path
 from typing import Any, Generic, Literal, Optional, TypeVar, get_args
 
 import numpy as np
 
 from .planner.kinematics import kinematic_step
+from .resources import DBC_FILE, cache_dir
 from .schema import TimingParams
 from .signals import PlannerInput, StateEstimate, time_to_collision
 
@@ -109,6 +116,21 @@ def car_chain() -> CarChain:
       computer (the AutoBox, on the same bus: the DBC holds no frame for it, so it is given the command frames'
       period).
     """
+    sensors, commands = car_hops()
+    solve = PAPER_SQP_SOLVE_S * HOST_CLOCK_HZ / MICROLABBOX_CLOCK_HZ
+    timing = TimingParams(sensor_delay_s=on_grid(sensors.latency_s), command_delay_s=on_grid(commands.latency_s),
+                          planning_delay_s=on_grid(solve, up=True) + on_grid(commands.latency_s), compensate=False)
+    return CarChain(sensors, commands, solve, timing)
+
+
+SENSOR_FRAMES = ("IMU", "WHEEL_SPEEDS", "EPS_STATUS")
+COMMAND_FRAMES = ("CMD_STEER", "CMD_TORQUE")
+HOP_SOURCES = ("timing.py", "canbus/bridge.py", "canbus/busload.py", "canbus/codec.py")
+"""The modules whose code turns the DBC into the hops: their text is part of the cached hops' key."""
+
+
+def dbc_hops() -> tuple[Hop, Hop]:
+    """The sensor and the command hop, read from config/kanon.dbc with its parser (cantools, python-can)."""
     from .canbus.bridge import cycle_time
     from .canbus.busload import worst_case_frame_bits
     from .canbus.codec import default_database
@@ -116,15 +138,53 @@ def car_chain() -> CarChain:
     db = default_database()
     baud = int(db.dbc.attributes["Baudrate"].value)
 
-    def hop(*names: str) -> Hop:
+    def hop(names: tuple[str, ...]) -> Hop:
         wire = max(worst_case_frame_bits(db.get_message_by_name(n).length) for n in names) / baud
         return Hop(names, cycle_time(db, *names), wire)
 
-    sensors, commands = hop("IMU", "WHEEL_SPEEDS", "EPS_STATUS"), hop("CMD_STEER", "CMD_TORQUE")
-    solve = PAPER_SQP_SOLVE_S * HOST_CLOCK_HZ / MICROLABBOX_CLOCK_HZ
-    timing = TimingParams(sensor_delay_s=on_grid(sensors.latency_s), command_delay_s=on_grid(commands.latency_s),
-                          planning_delay_s=on_grid(solve, up=True) + on_grid(commands.latency_s), compensate=False)
-    return CarChain(sensors, commands, solve, timing)
+    return hop(SENSOR_FRAMES), hop(COMMAND_FRAMES)
+
+
+def hops_cache_path() -> Path:
+    """Where the hops of the DBC are cached: ``$MOOSE_CACHE_DIR/timing/<key>.json``, the key a SHA-256 of the DBC's
+    bytes, the text of :data:`HOP_SOURCES` and the parser's version, so a changed file or code never finds another's
+    hops."""
+    digest = hashlib.sha256(DBC_FILE.read_bytes() + importlib.metadata.version("cantools").encode())
+    here = Path(__file__).parent
+    for name in HOP_SOURCES:
+        digest.update((here / name).read_bytes())
+    return cache_dir() / "timing" / f"{digest.hexdigest()[:32]}.json"
+
+
+def car_hops() -> tuple[Hop, Hop]:
+    """:func:`dbc_hops`, from the disk cache when it holds them: a node process that only needs the delays of the
+    ``car`` profile then loads neither cantools nor python-can (about 6 MB of each process's memory; docs/design.md,
+    "Processes").  The cached numbers are the parsed ones bit for bit (JSON keeps a float's every digit); an
+    unreadable or malformed entry is read from the DBC again and replaced, written whole (a temporary file renamed)."""
+    path = hops_cache_path()
+    try:
+        cached = json.loads(path.read_text(encoding="utf-8"))
+        hops = tuple(Hop(tuple(cached[k]["frames"]), cached[k]["period_s"], cached[k]["wire_s"])
+                     for k in ("sensors", "commands"))
+        if all(_valid_hop(h, frames) for h, frames in zip(hops, (SENSOR_FRAMES, COMMAND_FRAMES))):
+            return hops[0], hops[1]
+    except (OSError, ValueError, KeyError, TypeError):  # none yet, or not what this code writes: read the DBC
+        pass
+    sensors, commands = dbc_hops()
+    text = json.dumps({"sensors": dataclasses.asdict(sensors), "commands": dataclasses.asdict(commands)})
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile("w", dir=path.parent, suffix=".json.partial", delete=False,
+                                         encoding="utf-8") as handle:
+            handle.write(text)
+        os.replace(handle.name, path)
+    except OSError:
+        pass  # a read-only or full cache costs the next process the DBC's parser, nothing else
+    return sensors, commands
+
+
+def _valid_hop(hop: Hop, frames: tuple[str, ...]) -> bool:
+    return (hop.frames == frames and all(type(v) is float and 0.0 < v < math.inf for v in (hop.period_s, hop.wire_s)))
 
 
 def profile(name: str, compensate: bool = False) -> TimingParams:
