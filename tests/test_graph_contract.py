@@ -178,8 +178,8 @@ LEAN = ("motion_controller", "can_bridge", "weight_fbl")
 HEAVY = ("casadi", "moose.planner.mpc", "moose.planner.msf", "moose.maneuver", "scipy")
 
 
-def _loaded_after(code: str) -> list[str]:
-    probe = code + f"\nimport sys\nprint(sorted(m for m in {HEAVY!r} if m in sys.modules))"
+def _loaded_after(code: str, heavy: tuple[str, ...] = HEAVY) -> list[str]:
+    probe = code + f"\nimport sys\nprint(sorted(m for m in {heavy!r} if m in sys.modules))"
     result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr
     return ast.literal_eval(result.stdout.strip().splitlines()[-1])
@@ -188,6 +188,26 @@ def _loaded_after(code: str) -> list[str]:
 @pytest.mark.parametrize("name", LEAN)
 def test_a_lean_node_module_imports_neither_casadi_nor_the_planners(name: str) -> None:
     assert _loaded_after(f"from moose_ros.nodes import node_class\nnode_class({name!r})") == []
+
+
+OFF_THE_BUS = ("cantools", "can")
+"""The DBC's parser and python-can: about 6 MB of each process that loads them (bench/bench_memory.py)."""
+
+
+@pytest.mark.parametrize("name, absent", [
+    ("observer", OFF_THE_BUS), ("mpc_planner", OFF_THE_BUS), ("weight_fbl", OFF_THE_BUS),
+    ("motion_controller", OFF_THE_BUS), ("obstacle_detector", ("casadi", *OFF_THE_BUS)),
+    ("msf_planner", ("casadi", *OFF_THE_BUS)),
+])
+def test_a_running_node_off_the_bus_loads_neither_the_dbc_parser_nor_casadi_for_a_cached_table(
+        name: str, absent: tuple[str, ...]) -> None:
+    """Once the car's CAN hops (moose.timing.car_hops) and the maneuver table are in the machine's cache, a node that
+    does not talk to the bus reads the delays without cantools, and the detector and the MSF planner read the table
+    without CasADi: the first start fills the cache, the second is what every later start is."""
+    code = (f"from moose_ros.nodes import node_class\nfrom moose_ros.runtime import DdsNode\n"
+            f"rt = DdsNode({name!r})\nnode = node_class({name!r})(rt)\nrt.shutdown()")
+    _loaded_after(code, absent)
+    assert _loaded_after(code, absent) == []
 
 
 @pytest.mark.parametrize("name", ["motion_controller", "can_bridge", "weight_fbl"])

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import tracemalloc
 
 import numpy as np
 import pytest
@@ -275,3 +276,19 @@ def test_a_cached_table_is_the_integrated_one_bit_for_bit(tmp_path, monkeypatch)
             np.testing.assert_array_equal(replaced["y"], integrated._grids["y"])
     finally:
         maneuver._build_table.cache_clear()
+
+
+def test_a_table_in_memory_holds_its_arrays_not_a_python_float_per_entry() -> None:
+    """The detector and the MSF planner each hold a table (93 speeds × 751 times × 4 grids): its scalar queries read
+    the arrays through flat views; a list of Python floats per grid took 9 MB more in each of those processes."""
+    speeds = np.linspace(1.0, 12.0, 40)
+    prof = maneuver_profile(VEHICLE, MU, speeds, 6.0, 1e-2, 1)
+    grids = (prof.y, prof.vY, prof.aY)
+    tracemalloc.start()
+    try:
+        table = MaxSteeringTable(prof.t, speeds, *grids, MU)
+        held, _ = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert held < sum(g.nbytes for g in grids)  # the running maximum (one more grid) and the views, no copies
+    assert table.y_max(2.0, 5.0) == pytest.approx(float(table.y_max(np.array([2.0]), 5.0)[0]), rel=1e-15)

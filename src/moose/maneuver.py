@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import importlib.metadata
 import math
 import os
 import tempfile
@@ -29,10 +30,10 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any, NamedTuple, Sequence, Union
 
-import casadi as ca
 import numpy as np
 
 from .params import VehicleParams
+from .resources import cache_dir
 from .schema import ManeuverParams
 from .tire import Axles, lateral_forces
 
@@ -164,6 +165,8 @@ def maneuver_profile(vehicle: VehicleParams, mu: float, speeds: Sequence[float] 
     n_chunks = n_out - 1 - head
     if n_chunks <= 0:
         return prof
+    import casadi as ca  # here: a process that reads its table from the cache never loads CasADi
+
     sgn = -1.0 if side < 0 else 1.0
     s = ca.SX.sym("s", N_MANEUVER)
     vs = ca.SX.sym("v")
@@ -237,8 +240,9 @@ class MaxSteeringTable:
         self._dv = float(self.v[1] - self.v[0])
         self._inv_dt = 1.0 / float(grid_t[1] - grid_t[0])
         self._inv_dv = 1.0 / self._dv
-        # flat Python lists: the scalar path indexes them without NumPy overhead
-        self._flat = {name: grid.ravel().tolist() for name, grid in self._grids.items()}
+        # flat views of the grids: the scalar path indexes them without NumPy overhead, and without a Python float
+        # object per entry (a list of them took 9 MB more in each process that holds a table)
+        self._flat = {name: np.ascontiguousarray(grid).reshape(-1).data for name, grid in self._grids.items()}
 
     @classmethod
     def build(cls, vehicle: VehicleParams, params: ManeuverParams | None = None) -> "MaxSteeringTable":
@@ -352,10 +356,8 @@ def table_cache_path(vehicle: VehicleParams, params: ManeuverParams) -> Path:
     """Where the table of (``vehicle``, ``params``) is cached: ``$MOOSE_CACHE_DIR/tables/<key>.npz``, the key a
     SHA-256 of every field of both, the text of :data:`TABLE_SOURCES` and the NumPy and CasADi versions (the
     integration's arithmetic), so a changed input or code never finds another's table."""
-    from .ccompile import cache_dir
-
     digest = hashlib.sha256(repr((dataclasses.astuple(vehicle), dataclasses.astuple(params), np.__version__,
-                                  ca.CasadiMeta.version())).encode())
+                                  importlib.metadata.version("casadi"))).encode())
     here = Path(__file__).parent
     for name in TABLE_SOURCES:
         digest.update((here / name).read_bytes())
