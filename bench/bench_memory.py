@@ -7,14 +7,17 @@ of ``/proc/PID/status``) and its proportional set size (PSS, ``/proc/PID/smaps_r
 with other processes — libpython, NumPy, Cyclone DDS, CasADi — counted as a share).  RSS counts each
 shared library once per process, so the sum of RSS overstates what the graph takes; the sum of PSS is
 what it takes.  Prints, per node, the RSS once it announced itself, its peak RSS and PSS, and whether
-CasADi is mapped into it; then both totals (the largest sum of simultaneous samples) and the
-launcher's own RSS (the monitor and recorder; not a node).  Run: ``python bench/bench_memory.py``.
+CasADi was ever mapped into it; then both totals (the largest sum of simultaneous samples), the launcher's
+own RSS (the monitor and recorder; not a node) and the load average (the figures are taken on a shared
+machine).  The DDS domain is claimed with ``tests/isolation.py``.
+Run: ``python bench/bench_memory.py``.
 """
 from __future__ import annotations
 
 import io
 import os
 import socket
+import sys
 import tempfile
 import threading
 import time
@@ -25,6 +28,7 @@ from moose_ros.graph import GRAPHS
 from moose_ros.launch import launch
 
 TARGET_MB = 350.0
+REPO = Path(__file__).resolve().parents[1]
 
 
 def rss_mb(pid: int) -> float:
@@ -78,7 +82,11 @@ def node_children() -> dict[str, int]:
 
 
 def main() -> None:
-    os.environ.setdefault("ROS_DOMAIN_ID", str(1 + os.getpid() % 200))
+    sys.path.insert(0, str(REPO / "tests"))
+    from isolation import claim_domain
+
+    load = os.getloadavg()
+    os.environ.setdefault("ROS_DOMAIN_ID", str(claim_domain()))
     if "CYCLONEDDS_URI" not in os.environ:
         config = Path(tempfile.mkdtemp()) / "cyclonedds.xml"
         config.write_text('<CycloneDDS><Domain Id="any"><General><Interfaces><NetworkInterface name="lo"/>'
@@ -111,8 +119,8 @@ def main() -> None:
             peak_pss[name] = max(peak_pss.get(name, 0.0), pss[name])
             if name not in started and f"{name} started" in log:
                 started[name] = rss[name]
-            if rss[name]:
-                casadi[name] = maps(pid, "casadi")["casadi"]
+            # ever mapped: a process on its way out reads as mapping nothing
+            casadi[name] = casadi.get(name, False) or maps(pid, "casadi")["casadi"]
         if len(pids) == len(GRAPHS["can"]) and all(rss.values()):
             total_rss, total_pss = max(total_rss, sum(rss.values())), max(total_pss, sum(pss.values()))
         time.sleep(0.1)
@@ -125,6 +133,9 @@ def main() -> None:
         verdict = "meets" if total <= TARGET_MB else "misses"
         print(f"{label:>18} {total:22.1f}  ({verdict} the {TARGET_MB:.0f} MB target)")
     print(f"{'launcher RSS':>18} {rss_mb(os.getpid()):22.1f}  (monitor + recorder, this process; not a node)")
+    end = os.getloadavg()
+    print(f"load average {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} at the start, {end[0]:.1f} at the end, "
+          f"{os.cpu_count()} cores")
 
 
 if __name__ == "__main__":
