@@ -17,7 +17,7 @@ import stat
 from pathlib import Path
 from typing import Iterator
 
-from .params import ParamError
+from .errors import ParamError
 
 MAX_INPUT_BYTES = 256 * 1024
 """The largest input file read (256 KiB).  The shipped parameter file is 3 kB and a scenario 0.5 kB, so this is

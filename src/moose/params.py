@@ -19,6 +19,8 @@ from typing import TYPE_CHECKING, Any, Callable, Mapping, TypeVar
 
 import yaml
 
+from .errors import ParamError
+
 if TYPE_CHECKING:
     from _typeshed import DataclassInstance
 
@@ -26,10 +28,6 @@ D = TypeVar("D", bound="DataclassInstance")
 
 G = 9.81
 """Gravitational acceleration (m/s^2)."""
-
-
-class ParamError(ValueError):
-    """A parameter (file) is invalid; the message names the field and the value."""
 
 
 def positive(value: float) -> bool:
