@@ -201,7 +201,7 @@ OFF_THE_BUS = ("cantools", "can")
 ])
 def test_a_running_node_off_the_bus_loads_neither_the_dbc_parser_nor_casadi_for_a_cached_table(
         name: str, absent: tuple[str, ...]) -> None:
-    """Once the car's CAN hops (moose.timing.car_hops) and the maneuver table are in the machine's cache, a node that
+    """Once the car's CAN hops (moose.car_chain.car_hops) and the maneuver table are in the machine's cache, a node that
     does not talk to the bus reads the delays without cantools, and the detector and the MSF planner read the table
     without CasADi: the first start fills the cache, the second is what every later start is."""
     code = (f"from moose_ros.nodes import node_class\nfrom moose_ros.runtime import DdsNode\n"

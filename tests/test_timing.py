@@ -12,6 +12,7 @@ import cantools
 import numpy as np
 import pytest
 
+from moose.car_chain import car_hops, dbc_hops, hops_cache_path
 from moose.config import load_config, with_overrides
 from moose.motion import MotionController
 from moose.params import ParamError, VehicleParams
@@ -25,10 +26,7 @@ from moose.timing import (
     CommandHold,
     DelayLine,
     SteeringPredictor,
-    car_hops,
-    dbc_hops,
     describe,
-    hops_cache_path,
     predict,
     profile,
 )

@@ -574,10 +574,10 @@ class SimulationParams:
 
 
 def _car(name: str) -> float:
-    """A delay of the ``car`` profile (:func:`moose.timing.car_chain`: config/kanon.dbc, read when first needed)."""
-    from .timing import car_chain  # the DBC's parser (cantools) only where a default is taken
+    """A delay of the ``car`` profile (:func:`moose.car_chain.car_chain`: config/kanon.dbc, read when first needed)."""
+    from .car_chain import car_chain  # the DBC's parser (cantools) only where a default is taken
 
-    return float(getattr(car_chain().timing, name))
+    return float(getattr(car_chain(), name))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -31,7 +31,7 @@ import can
 from moose.params import ParamError
 from moose.signals import EpsSample, GpsSample, ImuSample, WheelSpeedSample
 
-from .codec import Codec
+from .codec import Codec, cycle_time
 from .health import BusHealth, BusState, HealthParams
 from .safety import Command, CommandGuard, GuardParams
 
@@ -46,15 +46,6 @@ LIMIT_SIGNALS = {("CMD_STEER", "SteerAngleCmd"): "delta_max", ("CMD_STEER", "Ste
 _EPS = 1e-9
 DEFAULT_GUARD = GuardParams()
 DEFAULT_HEALTH = HealthParams()
-
-
-def cycle_time(db: Any, *names: str) -> float:
-    """The common ``GenMsgCycleTime`` of the frames ``names`` (s); ParamError if they differ or have none."""
-    times = {name: db.get_message_by_name(name).cycle_time for name in names}
-    values = set(times.values())
-    if len(values) != 1 or not all(isinstance(v, int) and v > 0 for v in values):
-        raise ParamError(f"GenMsgCycleTime of {times!r} is invalid: expected one positive cycle time (ms) for all")
-    return values.pop() / 1000.0
 
 
 def check_limits_encodable(db: Any, params: GuardParams) -> None:

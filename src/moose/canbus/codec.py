@@ -27,6 +27,7 @@ from typing import Any, Optional
 import can
 import cantools
 
+from ..errors import ParamError
 from ..resources import DBC_FILE
 
 PROTECTED = ("CMD_STEER", "CMD_TORQUE")
@@ -173,3 +174,12 @@ class Codec:
                     return None
                 self.stats.lost += gap
         return message.name, {k: float(v) for k, v in values.items()}
+
+
+def cycle_time(db: Any, *names: str) -> float:
+    """The common ``GenMsgCycleTime`` of the frames ``names`` (s); ParamError if they differ or have none."""
+    times = {name: db.get_message_by_name(name).cycle_time for name in names}
+    values = set(times.values())
+    if len(values) != 1 or not all(isinstance(v, int) and v > 0 for v in values):
+        raise ParamError(f"GenMsgCycleTime of {times!r} is invalid: expected one positive cycle time (ms) for all")
+    return values.pop() / 1000.0
