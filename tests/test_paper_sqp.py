@@ -178,13 +178,16 @@ def test_caps_bounds_and_descent_on_the_mpc_cost(grid: PlanningGrid, n_p: int, v
 
 def test_planner_statuses_with_the_paper_baseline() -> None:
     inp = planner_input(7.0, 10.0, 2.6)
-    capped = MpcPlanner(PAPER, KINEMATIC).plan(inp)
+    late = MpcPlanner(PAPER, KINEMATIC).plan(inp)  # 1.4 s ahead: no plan keeps the path above y_safe
+    assert late.status == "barrier_violated" and late.iterations == 4  # the hand-over trigger outranks "capped"
+    assert late.accel[0, 1] == pytest.approx(6.0)  # full steering away, as the other solvers
+    early = planner_input(7.0, 40.0, 2.6)  # 5.7 s ahead: the capped plan clears y_safe
+    capped = MpcPlanner(PAPER, KINEMATIC).plan(early)
     assert capped.status == "capped" and capped.iterations == 4
-    assert capped.accel[0, 1] == pytest.approx(6.0)  # full steering away, as the other solvers
-    two_step = MpcPlanner(PAPER, dataclasses.replace(KINEMATIC, N_p=2)).plan(planner_input(7.0, 10.0, 2.6))
+    two_step = MpcPlanner(PAPER, dataclasses.replace(KINEMATIC, N_p=2)).plan(early)
     assert two_step.status == "converged"
     loose = MpcPlanner(dataclasses.replace(PAPER, caps=SolverCaps(max_iter=2, max_fun_evals=1000)), KINEMATIC)
-    assert loose.plan(inp).status == "capped" and loose.plan(inp).iterations == 2
+    assert loose.plan(early).status == "capped" and loose.plan(early).iterations == 2
     nan = dataclasses.replace(inp, estimate=dataclasses.replace(inp.estimate, vx=math.nan))
     failed = MpcPlanner(PAPER, KINEMATIC).plan(nan)
     assert failed.status == "failed" and failed.cost == math.inf and np.all(np.isfinite(failed.accel))

@@ -185,7 +185,7 @@ def test_bad_input_gives_clear_errors(tmp_path: Path) -> None:
     assert unknown.returncode == 2 and "node 'autopilot' is unknown" in unknown.stderr
     missing = subprocess.run(moose + ["node", "observer", "--params", str(tmp_path / "no.yaml")],
                              capture_output=True, text=True, timeout=60)
-    assert missing.returncode == 2 and "no such file" in missing.stderr
+    assert missing.returncode == 2 and "cannot be read: No such file or directory" in missing.stderr
     bad = tmp_path / "bad.yaml"
     bad.write_text("/**:\n  ros__parameters:\n    vehicle: {m: heavy}\n")
     wrong = subprocess.run(moose + ["node", "observer", "--params", str(bad)], capture_output=True, text=True,

@@ -359,7 +359,9 @@ RCLPY_CHECK = textwrap.dedent("""
     os.environ.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)
     node = create_node("rclpy_check", overrides={"use_sim_time": True, "vehicle.mu": 0.4})
     assert type(node).__name__ == "RclpyNode"
-    assert os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"  # ROS 2's setting, made before rclpy.init
+    assert node.discovery.range == "LOCALHOST"  # ROS 2's range when unset: this host only
+    assert "ROS_AUTOMATIC_DISCOVERY_RANGE" not in os.environ  # set for rclpy.init only, then restored
+    assert "bound to loopback" in node.describe_discovery()  # Fast DDS on its loopback profile
     assert node.use_sim_time is True and node.param("vehicle.mu") == 0.4 and node.now() == 0.0
     msg = node.make("moose_msgs/msg/WheelSpeeds", omega_rl=1.0)
     assert msg.omega_rl == 1.0
