@@ -21,10 +21,9 @@ from typing import Callable, Iterator
 
 import pytest
 
-from moose.cli.common import EXIT_BAD_INPUT, EXIT_CLEAR, EXIT_FAILED, EXIT_INCOMPLETE, OUTCOME_EXIT, outcome_exit_status
 from moose.resources import SCENARIO_DIR
 from moose.sweep.store import read_results
-from moose.verdict import OUTCOMES
+from moose.verdict import EXIT_BAD_INPUT, EXIT_CLEAR, EXIT_FAILED, EXIT_INCOMPLETE, OUTCOME_EXIT, OUTCOMES, exit_status
 
 MOOSE = [sys.executable, "-m", "moose.cli"]
 SHORT = ["--duration", "0.5", "--no-bag"]
@@ -98,7 +97,7 @@ def test_degenerate_tests_write_valid_json(tmp_path: Path, capsys: pytest.Captur
     """The review: ``--tau 0.001`` and ``--speed 1e-6`` wrote Infinity into the JSON."""
     out = here(capsys, "simulate", *adhoc, "--no-bag", "--json", str(tmp_path / "s.json"))
     summary = strict_json(tmp_path / "s.json")
-    assert out.returncode == outcome_exit_status(summary["outcome"])
+    assert out.returncode == exit_status(summary["outcome"])
     assert summary["notes"]  # what is not a number says why
 
 
@@ -145,8 +144,8 @@ def test_launch_checks_its_outputs_before_any_node_starts(tmp_path: Path) -> Non
 
 def test_every_outcome_has_an_exit_status() -> None:
     assert set(OUTCOME_EXIT) == set(OUTCOMES)
-    assert outcome_exit_status("clear") == EXIT_CLEAR and outcome_exit_status("incomplete") == EXIT_INCOMPLETE
-    assert {outcome_exit_status(o) for o in OUTCOMES if o not in ("clear", "incomplete")} == {EXIT_FAILED}
+    assert exit_status("clear") == EXIT_CLEAR and exit_status("incomplete") == EXIT_INCOMPLETE
+    assert {exit_status(o) for o in OUTCOMES if o not in ("clear", "incomplete")} == {EXIT_FAILED}
     assert len({EXIT_CLEAR, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INCOMPLETE}) == 4
 
 
@@ -258,7 +257,7 @@ def test_a_full_disk_under_the_bag_reports_the_verdict_then_the_output_error(
     """The probe: ``simulate --bag`` on a full tmpfs printed CLEAR and exited 2 ("bad input, nothing was run").
     Now the verdict comes first, then ``moose: error:`` for the bag, exit status 5; the JSON (elsewhere) is
     written, and the bag holds what its last checkpoint wrote."""
-    from moose.cli.common import EXIT_OUTPUT
+    from moose.verdict import EXIT_OUTPUT
     from moose_ros.bag import ReadReport, read_bag
 
     bag = tiny_disk(64) / "bag"
@@ -279,7 +278,7 @@ def test_a_sweep_on_a_full_disk_keeps_its_rows_and_a_corrupt_row_is_run_again(
     """The probe: ``sweep -o`` on a full disk ended in a traceback, and a corrupt middle line of cases.jsonl was
     skipped on --resume without a word.  Now: exit 5 naming the case that could not be recorded, the rows before
     it kept; --resume, once there is room, runs the rest; a corrupt row is reported and its case run again."""
-    from moose.cli.common import EXIT_OUTPUT
+    from moose.verdict import EXIT_OUTPUT
 
     disk = tiny_disk(16)  # the manifest and config.yaml take a page each, the journal one: two rows or so
     out_dir = disk / "sweep"

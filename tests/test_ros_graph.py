@@ -243,13 +243,13 @@ def test_moose_launch_reports_a_collision_that_cannot_be_avoided(tmp_path: Path)
     The whole graph through the command line, as a user runs it."""
     import json
 
-    from moose.cli import common
+    from moose.verdict import EXIT_FAILED
 
     out = tmp_path / "summary.json"
     proc = subprocess.run([sys.executable, "-m", "moose.cli", "launch", "--speed", "7", "--tau", "0.5",
                            "--obstacle-half-width", "4", "--duration", "2", "--json", str(out), "--no-bag"],
                           capture_output=True, text=True, timeout=240)
-    assert proc.returncode == getattr(common, "OUTCOME_EXIT", {}).get("collision", 0), proc.stderr[-2000:]
+    assert proc.returncode == EXIT_FAILED == 1, proc.stderr[-2000:]
     assert "Traceback" not in proc.stderr and "COLLISION" in proc.stdout
     summary = json.loads(out.read_text())
     assert summary["odom_samples"] > 250 and summary["complete"]  # 3 s at 100 Hz arrived

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 
 from moose.canbus.ecu import ECU_TIMEOUT
-from moose.cli.common import EXIT_DEGRADED, EXIT_FAILED, EXIT_INCOMPLETE, EXIT_INTERRUPTED
 from moose.params import ParamError
+from moose.verdict import EXIT_DEGRADED, EXIT_FAILED, EXIT_INCOMPLETE, EXIT_INTERRUPTED, exit_status
 from moose_ros.faults import Fault, matrix_cases
 from moose_ros.graph import (
     ACTUATOR_COMMAND,
@@ -18,7 +18,7 @@ from moose_ros.graph import (
     TOPICS,
     essential_upstream,
 )
-from moose_ros.incidents import DEGRADING, KINDS, IncidentLog, exit_status
+from moose_ros.incidents import DEGRADING, KINDS, IncidentLog
 from moose_ros.nodes.base import InputWatch
 
 

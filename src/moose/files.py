@@ -7,7 +7,7 @@ device (``/dev/zero`` never ends), a directory, a file of gigabytes or of bytes 
 
 Output paths are checked before any work starts (:mod:`moose.cli.common`); what can still fail is writing
 after the work is done, on a full disk: :class:`OutputError`.  The command then reports its result first and
-the failed output after it, with an exit status of its own (:data:`moose.cli.common.EXIT_OUTPUT`).
+the failed output after it, with an exit status of its own (:data:`moose.verdict.EXIT_OUTPUT`).
 """
 from __future__ import annotations
 

@@ -179,3 +179,43 @@ def finite_or_none(value: Optional[float]) -> Optional[float]:
         return None
     value = float(value)
     return value if math.isfinite(value) else None
+
+
+# --- exit statuses: what the ``moose`` command (and ``moose_ros``'s plugins) return for a verdict ---------------
+
+EXIT_CLEAR = 0
+"""The run was ``clear`` (and, for other commands, everything worked)."""
+EXIT_FAILED = 1
+"""The run failed: ``collision``, ``left_field``, ``lost_control`` or ``stopped_short``.  Bag tools: the command
+ran, but some data could not be read (each loss is reported on stderr)."""
+EXIT_BAD_INPUT = 2
+"""Bad input (``moose: error: …``): nothing was run."""
+EXIT_INCOMPLETE = 3
+"""The run is ``incomplete``: its data do not cover it (cut short, a stalled simulator)."""
+EXIT_INTERRUPTED = 130
+"""Ctrl-C (128 + SIGINT)."""
+
+OUTCOME_EXIT: dict[Outcome, int] = {"clear": EXIT_CLEAR, "collision": EXIT_FAILED, "left_field": EXIT_FAILED,
+                                "lost_control": EXIT_FAILED, "stopped_short": EXIT_FAILED,
+                                "incomplete": EXIT_INCOMPLETE}
+"""The exit status of each outcome of :data:`OUTCOMES` (``moose simulate``, ``moose launch``)."""
+
+EXIT_DEGRADED = 4
+"""``moose launch``: the outcome was ``clear``, but the run was degraded — a node failed to start, died, stalled
+or was stopped by a fault, or the graph fell back (a planner replaced, a minimum-risk maneuver): the car came
+through, the system did not (:mod:`moose_ros.incidents`)."""
+
+EXIT_OUTPUT = 5
+"""The command did its work and reported the result (a run's verdict, the cases of a sweep), but an output
+could not be written after it (a full disk): ``moose: error: …`` names the output and what was kept.  It takes
+precedence over the outcome's status; the outcome is in what was printed."""
+
+
+def exit_status(outcome: str, degraded: bool = False, interrupted: Optional[str] = None) -> int:
+    """The exit status of a run with ``outcome`` (:data:`OUTCOME_EXIT`: 0 clear, 1 a failure, 3 incomplete): 130
+    when it was ``interrupted`` by ``"SIGINT"`` (Ctrl-C), and :data:`EXIT_DEGRADED` for a clear run that was
+    ``degraded`` (``moose launch``: a node failed, stalled or was replaced by a fallback)."""
+    if interrupted == "SIGINT":
+        return EXIT_INTERRUPTED
+    status = OUTCOME_EXIT[outcome]  # type: ignore[index]
+    return EXIT_DEGRADED if status == EXIT_CLEAR and degraded else status

@@ -20,8 +20,10 @@ from typing import Callable, Sequence
 
 from ..files import OutputError
 from ..params import ParamError
+from ..scenario import DEFAULT_SCENARIO
+from ..verdict import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_OUTPUT
 from . import benchmark, budget, can, reproduce, simulate, sweep
-from .common import DEFAULT_SCENARIO, EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_OUTPUT, INTERRUPTS
+from .common import INTERRUPTS
 from .plugins import add_plugin_commands
 
 __all__ = ["DEFAULT_SCENARIO", "build_parser", "main"]

@@ -1,5 +1,5 @@
-"""Arguments and helpers that several commands share (this package's and plugins'): scenario flags, exit statuses,
-output paths checked before a run starts."""
+"""Arguments and helpers that several commands share (this package's and plugins'): scenario flags, output paths
+checked before a run starts.  The exit statuses live with the verdicts (:mod:`moose.verdict`)."""
 from __future__ import annotations
 
 import argparse
@@ -8,39 +8,9 @@ from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
 
 from ..params import ParamError
+from ..scenario import DEFAULT_SCENARIO
 from ..schema import PLANNER_MODES
 from ..timing import PROFILES
-
-DEFAULT_SCENARIO = "paper_v7_tau1.4"
-"""The paper's extreme case (7 m/s, τ = 1.4 s, ν ≈ 0.95): the main job."""
-
-
-EXIT_CLEAR = 0
-"""The run was ``clear`` (and, for other commands, everything worked)."""
-EXIT_FAILED = 1
-"""The run failed: ``collision``, ``left_field``, ``lost_control`` or ``stopped_short``.  Bag tools: the command
-ran, but some data could not be read (each loss is reported on stderr)."""
-EXIT_BAD_INPUT = 2
-"""Bad input (``moose: error: …``): nothing was run."""
-EXIT_INCOMPLETE = 3
-"""The run is ``incomplete``: its data do not cover it (cut short, a stalled simulator)."""
-EXIT_INTERRUPTED = 130
-"""Ctrl-C (128 + SIGINT)."""
-
-OUTCOME_EXIT: dict[str, int] = {"clear": EXIT_CLEAR, "collision": EXIT_FAILED, "left_field": EXIT_FAILED,
-                                "lost_control": EXIT_FAILED, "stopped_short": EXIT_FAILED,
-                                "incomplete": EXIT_INCOMPLETE}
-"""The exit status of each outcome of :data:`moose.verdict.OUTCOMES` (``moose simulate``, ``moose launch``)."""
-
-EXIT_DEGRADED = 4
-"""``moose launch``: the outcome was ``clear``, but the run was degraded — a node failed to start, died, stalled
-or was stopped by a fault, or the graph fell back (a planner replaced, a minimum-risk maneuver): the car came
-through, the system did not (:mod:`moose_ros.incidents`)."""
-
-EXIT_OUTPUT = 5
-"""The command did its work and reported the result (a run's verdict, the cases of a sweep), but an output
-could not be written after it (a full disk): ``moose: error: …`` names the output and what was kept.  It takes
-precedence over the outcome's status; the outcome is in what was printed."""
 
 
 class Interrupts:
@@ -81,11 +51,6 @@ class Interrupts:
 
 INTERRUPTS = Interrupts()
 """The ``moose`` command's (installed by :func:`moose.cli.main`)."""
-
-
-def outcome_exit_status(outcome: str) -> int:
-    """The exit status of a run with ``outcome`` (:data:`OUTCOME_EXIT`)."""
-    return OUTCOME_EXIT[outcome]
 
 
 def positive_float(text: str) -> float:
@@ -219,47 +184,6 @@ def add_scenario_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--mu-estimate", type=positive_float,
                        help="friction the stack assumes, when it differs from the road's (a robustness experiment)")
     group.add_argument("--seed", type=non_negative_int, default=0, help="seed of the sensor noise (an integer >= 0)")
-
-
-def scenario_from_args(args: Any, vehicle: Any = None) -> Any:
-    """The scenario named by ``args`` (file, CommonRoad file, or ad-hoc flags): any object with the attributes of
-    :func:`add_scenario_arguments` (``scenario``, ``speed``, ``tau``, ``obstacle_half_width``,
-    ``obstacle_length``, ``duration``, ``mu``; ``commonroad`` may be absent), such as parsed arguments or a
-    node's parameters.  A CommonRoad file is read with ``vehicle``'s footprint (default: ``--config``'s)."""
-    import dataclasses
-
-    from ..scenario import adhoc_scenario, load_scenario
-
-    adhoc = [args.speed, args.tau, args.obstacle_half_width]
-    commonroad = getattr(args, "commonroad", None)
-    if commonroad is not None and (args.scenario or any(v is not None for v in adhoc)):
-        raise ParamError("--commonroad cannot be combined with --scenario or the ad-hoc flags")
-    if commonroad is not None:
-        from ..commonroad import require
-
-        require("--commonroad")
-        from ..commonroad.scenario import load as load_commonroad
-
-        if vehicle is None:
-            from ..config import load_config
-
-            vehicle = load_config(getattr(args, "config", None), "moose").vehicle
-        scenario = load_commonroad(commonroad, vehicle)
-    elif any(v is not None for v in adhoc):
-        if args.scenario:
-            raise ParamError("--scenario cannot be combined with the ad-hoc flags --speed/--tau/--obstacle-half-width")
-        if any(v is None for v in adhoc):
-            raise ParamError("an ad-hoc moose test needs --speed, --tau and --obstacle-half-width")
-        scenario = adhoc_scenario(args.speed, args.tau, args.obstacle_half_width, args.obstacle_length,
-                                  field_margin=getattr(args, "field_margin", None))
-    else:
-        scenario = load_scenario(args.scenario or DEFAULT_SCENARIO)
-    changes: dict[str, Any] = {}
-    if args.duration is not None:
-        changes["duration"] = args.duration
-    if args.mu is not None:
-        changes["mu"] = args.mu
-    return dataclasses.replace(scenario, **changes) if changes else scenario
 
 
 def add_timing_argument(parser: Any) -> None:

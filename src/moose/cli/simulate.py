@@ -6,7 +6,7 @@ ROS 2 bag by the recorder plugin (entry point group ``moose.recorders``, provide
 checked before the run starts; one that cannot be written after it (a full disk) is reported after the
 verdict, the others are still written.  Exit status: 0 ``clear``, 1 a failure outcome (``collision``,
 ``left_field``, ``lost_control``, ``stopped_short``), 3 ``incomplete``, 2 bad input, 5 an output could not
-be written (the verdict is printed above the error), 130 Ctrl-C (:data:`moose.cli.common.OUTCOME_EXIT`).
+be written (the verdict is printed above the error), 130 Ctrl-C (:data:`moose.verdict.OUTCOME_EXIT`).
 """
 from __future__ import annotations
 
@@ -18,17 +18,17 @@ from typing import Any, Callable, Optional
 
 from ..files import OutputError
 from ..params import ParamError
+from ..scenario.args import scenario_from_args
+from ..verdict import exit_status
 from .common import (
     INTERRUPTS,
     add_scenario_arguments,
     add_timing_argument,
     check_output_dir,
     check_output_file,
-    outcome_exit_status,
     plot_suffixes,
     run_config,
     run_folder,
-    scenario_from_args,
     write_output,
 )
 from .plugins import recorder
@@ -160,5 +160,5 @@ def cmd_simulate(args: argparse.Namespace) -> int:
             failures.append(str(exc))
     if failures:
         raise OutputError("; ".join(failures))
-    return outcome_exit_status(summary["outcome"])
+    return exit_status(summary["outcome"])
 

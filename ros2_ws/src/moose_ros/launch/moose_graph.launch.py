@@ -13,7 +13,7 @@ graph (whichever group launches them) before it starts the clock.
 """
 import typing
 
-from moose.cli.common import DEFAULT_SCENARIO
+from moose.scenario import DEFAULT_SCENARIO
 from moose.schema import PlannerMode
 from moose_ros.graph import GROUPS
 

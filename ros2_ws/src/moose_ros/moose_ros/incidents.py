@@ -15,15 +15,14 @@ Incidents come from two sources, both recorded by ``moose launch``:
   below :data:`RATE_TOLERANCE` of the requested one ``rate_not_held``, a run ended early ``cut_short``.
 
 A run is *degraded* when it had an incident of a :data:`DEGRADING` kind; deadline misses, a rate not held,
-dropped inputs and plain warnings are reported but do not degrade it.  :func:`exit_status` maps a run to
-the exit status of ``moose launch`` (the statuses of ``moose simulate``, plus :data:`EXIT_DEGRADED`).
+dropped inputs and plain warnings are reported but do not degrade it.  :func:`moose.verdict.exit_status` maps a run to
+the exit status of ``moose launch`` (:func:`moose.verdict.exit_status`: the statuses of ``moose simulate``, plus
+:data:`moose.verdict.EXIT_DEGRADED`).
 """
 from __future__ import annotations
 
 import dataclasses
 from typing import Any, Optional
-
-from moose.cli.common import EXIT_DEGRADED, EXIT_INTERRUPTED, OUTCOME_EXIT
 
 KINDS = {
     "failed_to_start": "a node exited before it announced itself on /diagnostics",
@@ -127,13 +126,3 @@ def _number(text: str) -> float:
         return float(text)
     except (TypeError, ValueError):
         return 0.0
-
-
-def exit_status(outcome: str, degraded: bool, interrupted: Optional[str]) -> int:
-    """The exit status of ``moose launch``: 130 on Ctrl-C; else the outcome's (0 clear, 1 a failure, 3
-    incomplete — :data:`moose.cli.common.OUTCOME_EXIT`), but :data:`EXIT_DEGRADED` for a clear run that
-    was degraded (a node failed, stalled or was replaced by a fallback)."""
-    if interrupted == "SIGINT":
-        return EXIT_INTERRUPTED
-    status = OUTCOME_EXIT[outcome]
-    return EXIT_DEGRADED if status == 0 and degraded else status

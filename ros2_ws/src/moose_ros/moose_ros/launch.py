@@ -45,13 +45,14 @@ from moose.scenario import Scenario
 from moose.schema import Config, PlannerMode
 from moose.signals import Blend, Reference
 from moose.simulation import SimulationResult
+from moose.verdict import exit_status
 
 from . import convert as cv
 from .bag import Recorder
 from .bag.params import RunParameters
 from .faults import Fault, FaultInjector
 from .graph import BLEND, DIAGNOSTICS, GRAPHS, NODES, ODOM, PLAN_MPC, STEERING, THREAT
-from .incidents import RATE_TOLERANCE, IncidentLog, exit_status
+from .incidents import RATE_TOLERANCE, IncidentLog
 from .parameters import check_parameter_file, node_parameters, parameter_names
 from .process import spawn
 from .runtime import create_node, process, rclpy_missing

@@ -20,6 +20,8 @@ from pathlib import Path
 from typing import Any, Collection, Literal, Mapping, Optional
 
 from moose.params import WILDCARD, ParamError, build, check, non_negative, positive
+from moose.scenario import Scenario
+from moose.scenario.args import scenario_from_args
 
 from .graph import COMMAND_TIMEOUT, NODES
 
@@ -48,7 +50,7 @@ class NodeParams:
 class ScenarioParams(NodeParams):
     """The moose test a node assumes: a scenario by name or path, or an ad-hoc test (``speed``, ``tau`` and
     ``obstacle_half_width``); ``duration`` and ``mu`` change either.  Read as ``moose simulate`` reads its
-    flags (:func:`moose.cli.common.scenario_from_args`)."""
+    flags (:func:`moose.scenario.args.scenario_from_args`)."""
 
     scenario: Optional[str] = None
     """Name in config/scenarios or a YAML path; ``None``: the default scenario of ``moose simulate``."""
@@ -61,10 +63,8 @@ class ScenarioParams(NodeParams):
     field_margin: Optional[float] = _checked(None, non_negative, "a non-negative distance (m)")
     """Ad-hoc tests: the field reaches this far beside the obstacle (``--field-margin``); ``None``: the paper's."""
 
-    def load_scenario(self) -> Any:
+    def load_scenario(self) -> Scenario:
         """The :class:`moose.scenario.Scenario` these parameters name."""
-        from moose.cli.common import scenario_from_args
-
         return scenario_from_args(self)
 
 

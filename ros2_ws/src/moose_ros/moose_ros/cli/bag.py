@@ -2,10 +2,10 @@
 
 Reading commands (info, play, export, replan, view) deliver everything they can read — a damaged chunk is
 skipped, a truncated or unfinished recording is read to its end — then report every message they could not
-read on stderr (``moose: warning: …``) and exit with status 1 (:data:`moose.cli.common.EXIT_FAILED`); a topic
+read on stderr (``moose: warning: …``) and exit with status 1 (:data:`moose.verdict.EXIT_FAILED`); a topic
 the bag does not have, a topic of the graph with another type, or an unusable output path is an error (status
 2) before anything is done.  ``record`` whose bag cannot be written any more (a full disk) stops recording and
-exits with status 5 (:data:`moose.cli.common.EXIT_OUTPUT`); the bag holds what was recorded up to then.
+exits with status 5 (:data:`moose.verdict.EXIT_OUTPUT`); the bag holds what was recorded up to then.
 """
 from __future__ import annotations
 
@@ -15,10 +15,11 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from moose.cli.common import EXIT_CLEAR, EXIT_FAILED, check_output_file, plot_suffixes, positive_float, run_folder
+from moose.cli.common import check_output_file, plot_suffixes, positive_float, run_folder
 from moose.files import OutputError
 from moose.params import ParamError
 from moose.schema import PLANNER_MODES
+from moose.verdict import EXIT_CLEAR, EXIT_FAILED
 
 
 def add_subparser(subparsers: Any) -> None:

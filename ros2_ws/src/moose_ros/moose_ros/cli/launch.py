@@ -19,12 +19,12 @@ from moose.cli.common import (
     check_output_file,
     positive_float,
     run_folder,
-    scenario_from_args,
     write_output,
 )
 from moose.cli.simulate import format_summary
 from moose.files import OutputError
 from moose.params import ParamError
+from moose.scenario.args import scenario_from_args
 
 from ..graph import GRAPHS
 from ..live import DEFAULT_HOST, DEFAULT_PORT

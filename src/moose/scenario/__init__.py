@@ -18,12 +18,12 @@ from typing import Any, Optional
 
 import yaml
 
-from .files import read_input
-from .paper import PAPER_FRICTION
-from .params import ParamError, build, check, non_negative, positive, replace
-from .resources import SCENARIO_DIR
-from .schema import Config
-from .signals import Obstacle as Box
+from ..files import read_input
+from ..paper import PAPER_FRICTION
+from ..params import ParamError, build, check, non_negative, positive, replace
+from ..resources import SCENARIO_DIR
+from ..schema import Config
+from ..signals import Obstacle as Box
 
 PAPER_FIELD = Box(-50.0, 150.0, -5.0, 10.0)
 """The drivable field by default: the plotted extent of the paper's result figures (m)."""
@@ -185,3 +185,7 @@ def adhoc_scenario(
         field=field,
         duration=duration,
     )
+
+
+DEFAULT_SCENARIO = "paper_v7_tau1.4"
+"""The paper's extreme case (7 m/s, τ = 1.4 s, ν ≈ 0.95): the main job."""
