@@ -110,18 +110,29 @@ class CommandHold(Generic[T]):
     def __init__(self, delay_s: float, period_s: float) -> None:
         self._line: DelayLine[T] = DelayLine(delay_s, period_s)
         self._acting: Optional[T] = None
+        self._first: Optional[T] = None
+        """The first command, acting from its push and not yet handed out by :meth:`arrivals`."""
 
     def push(self, t: float, command: T) -> None:
         """The command computed at ``t``."""
         self._line.push(t, command)
         if self._acting is None:
-            self._acting = command
+            self._acting = self._first = command
 
-    def acting(self, t: float) -> T:
-        """The command acting at ``t`` (a command must have been pushed)."""
+    def arrivals(self, t: float) -> list[T]:
+        """The commands that reach the actuators at ``t``, in order (the first one at once, then each d_c after it
+        was computed): what an actuator that supervises its commands (the CAN guard, the ECUs) receives."""
         due = self._line.pop_due(t)
         if due:
             self._acting = due[-1]
+        if self._first is not None:
+            due.insert(0, self._first)
+            self._first = None
+        return due
+
+    def acting(self, t: float) -> T:
+        """The command acting at ``t`` (a command must have been pushed)."""
+        self.arrivals(t)
         if self._acting is None:
             raise ValueError("no command was pushed yet")
         return self._acting

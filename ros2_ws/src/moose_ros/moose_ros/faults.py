@@ -67,18 +67,21 @@ class FaultInjector:
     """Applies faults to the node processes at their times; records each one."""
 
     def __init__(self, faults: Sequence[Fault], procs: dict[str, subprocess.Popen], rate: float, log: IncidentLog,
-                 say: Callable[[str], None]) -> None:
+                 say: Callable[[str], None], lockstep: bool = False) -> None:
         self.pending = sorted(faults, key=lambda f: f.at)
         self.procs, self.rate, self.log, self.say = procs, rate, log, say
-        self.stopped: dict[str, float] = {}
-        """Node → wall-clock time at which it gets SIGCONT."""
+        self.lockstep = lockstep
+        """Stalls end at a simulated time (the lockstep graph has no rate); a stalled simulator, which stops simulated
+        time itself, after D wall-clock seconds."""
+        self.stopped: dict[str, tuple[float, bool]] = {}
+        """Node → (time at which it gets SIGCONT, on the simulated clock rather than the wall clock)."""
         self.killed: set[str] = set()
 
     def poll(self, t: float) -> None:
         """Apply what is due at simulated time ``t``, and resume stalls whose time is up."""
         now = time.monotonic()
-        for node, until in list(self.stopped.items()):
-            if now >= until:
+        for node, (until, simulated) in list(self.stopped.items()):
+            if (t if simulated else now) >= until:
                 self._signal(node, signal.SIGCONT)
                 del self.stopped[node]
                 self.say(f"fault: {node} continued (SIGCONT)")
@@ -94,7 +97,9 @@ class FaultInjector:
                 text = f"SIGKILL at t = {t:.2f} s"
             else:
                 self._signal(fault.node, signal.SIGSTOP)
-                self.stopped[fault.node] = now + fault.duration / self.rate
+                simulated = self.lockstep and fault.node != "vehicle_simulator"
+                self.stopped[fault.node] = ((t + fault.duration, True) if simulated
+                                            else (now + fault.duration / (1.0 if self.lockstep else self.rate), False))
                 text = f"SIGSTOP at t = {t:.2f} s for {fault.duration:g} s"
             self.log.add(t, fault.node, "fault_injected", f"{fault}: {text}")
             self.say(f"fault {fault}: {text}")

@@ -53,6 +53,7 @@ from .bag.params import RunParameters
 from .faults import Fault, FaultInjector
 from .graph import BLEND, DIAGNOSTICS, GRAPHS, NODES, ODOM, PLAN_MPC, STEERING, THREAT
 from .incidents import RATE_TOLERANCE, IncidentLog
+from .lockstep import STUCK_TIMEOUT
 from .parameters import check_parameter_file, node_parameters, parameter_names
 from .process import spawn
 from .runtime import create_node, process, rclpy_missing
@@ -63,6 +64,8 @@ STOP_GRACE = 5.0
 DOMAIN_CHECK = 1.0
 """Seconds the launcher listens for other nodes in its DDS domain before it starts any (:func:`check_domain`)."""
 MONITOR_NAME = "moose_monitor"
+LOCKSTEP_MIN_RATE = 0.05
+"""The slowest lockstep run the launcher waits for (simulated seconds per wall-clock second), beyond start-up."""
 
 
 @dataclasses.dataclass
@@ -166,14 +169,17 @@ def planner_mode(planner: Optional[PlannerMode], params_file: Optional[str]) -> 
 
 
 def node_overrides(graph: str, planner: str, params: Optional[dict[str, Any]] = None,
-                   params_file: Optional[str] = None, seed: int = 0, rate: float = 1.0) -> dict[str, dict[str, Any]]:
+                   params_file: Optional[str] = None, seed: int = 0, rate: float = 1.0, lockstep: bool = False,
+                   faults: Sequence[Fault] = ()) -> dict[str, dict[str, Any]]:
     """Each node's parameter overrides for one run of ``graph`` with ``planner``, checked before anything starts.
 
     ``params`` go to every node that takes them (:mod:`moose_ros.parameters`; dotted keys of the core's
     groups go to all); a key that no node of the graph takes is an error, and so is any parameter that a node
     would refuse (the file's values included), so a bad configuration stops the launch before a node runs.
     The planner node that ``planner`` does not use is left out (:data:`moose.planner.MODE_PLANNERS`: a baseline runs
-    in ``msf_planner``, without ``mpc_planner``).
+    in ``msf_planner``, without ``mpc_planner``).  ``lockstep``: every node gets the graph's nodes
+    (``lockstep_nodes``, :mod:`moose_ros.lockstep`) and runs on the ticks, not on a clock; the simulator gets the
+    ``faults`` (its fault plan).
     """
     if params_file:
         check_parameter_file(params_file, GRAPHS[graph], graph)
@@ -183,8 +189,13 @@ def node_overrides(graph: str, planner: str, params: Optional[dict[str, Any]] = 
     nodes = [n for n in GRAPHS[graph] if n not in unused]
     given = dict(params or {}, **{"simulation.planner": planner})
     simulated = "vehicle_simulator" in nodes
+    if lockstep and not simulated:
+        raise ParamError(f"--lockstep needs the vehicle simulator: the graph {graph!r} has none (the car runs in "
+                         "real time)")
     if simulated:
         given.update(seed=seed, rate=rate, vehicle_bus="can" if "can_bridge" in nodes else "topics")
+    if lockstep:
+        given["lockstep_nodes"] = list(nodes)
     if "can_interface" in given:
         from moose.canbus.bus import INTERFACES
 
@@ -200,10 +211,13 @@ def node_overrides(graph: str, planner: str, params: Optional[dict[str, Any]] = 
     for name in nodes:
         own = parameter_names(name)
         overrides = {k: v for k, v in given.items() if "." in k or k in own}
-        # simulated time only when the simulator is there to publish /clock (not on the car)
-        overrides["use_sim_time"] = simulated and name != "vehicle_simulator"
+        # simulated time only when the simulator is there to publish /clock (not on the car); in lockstep each
+        # node's time is the tick it handles
+        overrides["use_sim_time"] = simulated and name != "vehicle_simulator" and not lockstep
         if name == "vehicle_simulator":
             overrides["wait_for"] = [n for n in nodes if n != name]
+            if lockstep and faults:
+                overrides["faults"] = [str(f) for f in faults]
         merged = _file_params(params_file, name)
         for key, value in overrides.items():
             set_dotted(merged, key, value)
@@ -245,6 +259,7 @@ def launch(
     bag: Optional[Any] = None,
     foxglove: Optional[tuple[str, int]] = None,
     runtime: Union[None, str, Mapping[str, str]] = None,
+    lockstep: bool = False,
 ) -> dict[str, Any]:
     """Run the graph once and return the summary: the keys of ``moose simulate``'s, plus ``node_exits``,
     ``node_status``, ``incidents``, ``degraded``, ``deadline_misses``, ``stalls``, ``real_time_factor``,
@@ -257,11 +272,13 @@ def launch(
     ``params``: node parameters (``scenario`` or the ad-hoc ``speed``/``tau``/…, ``can_interface``, …) given
     to every node that takes them; see :func:`node_overrides`.  ``faults``: the faults to inject
     (:class:`moose_ros.faults.Fault`).  ``foxglove``: (host, port) of a live view
-    (:class:`moose_ros.live.LiveView`) served while the graph runs."""
+    (:class:`moose_ros.live.LiveView`) served while the graph runs.  ``lockstep``: the graph steps simulated time
+    only when every node has handled the tick (:mod:`moose_ros.lockstep`); ``rate`` is then not used, and the
+    faults act at their simulated times."""
     planner = planner_mode(planner, params_file)
     if scenario.mu is not None:  # the road of this run, for every node: one friction in the whole graph
         params = {"vehicle.mu": scenario.mu, **params}
-    overrides = node_overrides(graph, planner, params, params_file, seed, rate)
+    overrides = node_overrides(graph, planner, params, params_file, seed, rate, lockstep, faults)
     for fault in faults:
         if fault.node not in overrides:
             raise ParamError(f"--fault {str(fault)!r} is invalid: {fault.node!r} is not a node of this run "
@@ -318,7 +335,7 @@ def launch(
 
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)} \
         if threading.current_thread() is threading.main_thread() else {}
-    injector = FaultInjector(faults, procs, rate, log, say)
+    injector = FaultInjector(faults, procs, rate, log, say, lockstep=lockstep)
     silent: set[str] = set()
     cut_short = ""
     try:
@@ -336,7 +353,10 @@ def launch(
         planned = scenario.lead_time + scenario.duration
         # with the simulator: its run at ``rate`` plus its start-up (it waits up to a minute for the nodes); without
         # (the car): the planned run on the wall clock
-        limit = start + (duration if duration is not None else planned / rate + 60.0 if simulated else planned)
+        if lockstep:  # as fast as the graph goes; a graph that stops going ends itself (lockstep_stuck)
+            limit = start + (duration if duration is not None else planned / LOCKSTEP_MIN_RATE + 60.0 + STUCK_TIMEOUT)
+        else:
+            limit = start + (duration if duration is not None else planned / rate + 60.0 if simulated else planned)
         while not stop.is_set() and time.monotonic() < limit:
             node.spin_once(0.05)
             t_sim = monitor.sim_time
@@ -388,7 +408,9 @@ def launch(
             recorder.close()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
-    summary = _summary(monitor, planner, seed, rate, exits, ends, faults, cut_short, interrupted)
+    summary = _summary(monitor, planner, seed, None if lockstep else rate, exits, ends, faults, cut_short,
+                       interrupted)
+    summary["lockstep"] = lockstep
     summary["runtime"] = runtimes
     summary["bag_error"] = recorder.error if recorder is not None else None  # the recording, not the run
     return summary
@@ -461,7 +483,7 @@ def _stop_children(procs: dict[str, subprocess.Popen], exits: dict[str, int], en
                 log.add(monitor.sim_time, name, "died", ends[name])
 
 
-def _summary(monitor: Monitor, planner: PlannerMode, seed: int, rate: float, exits: dict[str, int],
+def _summary(monitor: Monitor, planner: PlannerMode, seed: int, rate: Optional[float], exits: dict[str, int],
              ends: dict[str, str],
              faults: Sequence[Fault], cut_short: str, interrupted: list[str]) -> dict[str, Any]:
     log = monitor.log
@@ -473,7 +495,7 @@ def _summary(monitor: Monitor, planner: PlannerMode, seed: int, rate: float, exi
             log.add(None, name, "deadline_missed", f"{misses} deadline misses (longest executor gap "
                                                    f"{counters.get('longest_gap_ms', 0):.0f} ms)")
     achieved = monitor.real_time_factor()
-    if achieved is not None and achieved < RATE_TOLERANCE * rate:
+    if rate is not None and achieved is not None and achieved < RATE_TOLERANCE * rate:
         log.add(None, "vehicle_simulator", "rate_not_held",
                 f"--rate {rate:g} not held: achieved {achieved:.2f} (below {RATE_TOLERANCE:g} × requested)")
     summary = summarize(monitor.result(planner, seed))

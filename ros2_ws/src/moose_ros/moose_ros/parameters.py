@@ -38,7 +38,15 @@ class NodeParams:
     """Parameters of a node without parameters of its own; the base of the others: each field with a
     ``check`` in its metadata is range-checked when given (``None`` means not given)."""
 
+    lockstep_nodes: tuple[str, ...] = ()
+    """The nodes of the graph when it runs in lockstep (``moose launch --lockstep``, :mod:`moose_ros.lockstep`);
+    empty: real time."""
+
     def __post_init__(self) -> None:
+        unknown = [n for n in self.lockstep_nodes if n not in NODES]
+        if unknown:
+            raise ParamError(f"lockstep_nodes = {list(self.lockstep_nodes)!r} is invalid: {unknown[0]!r} is no node; "
+                             f"nodes: {', '.join(NODES)}")
         for f in dataclasses.fields(self):
             rule = f.metadata.get("check")
             value = getattr(self, f.name)
@@ -104,6 +112,9 @@ class SimulatorParams(ScenarioParams, CanBusParams):
     """Start without the missing ``wait_for`` nodes after this long (s, wall clock)."""
     command_timeout: float = _checked(COMMAND_TIMEOUT, positive, "a positive time (s)")
     """Actuator commands older than this (s) are ignored (zero torque and EPS rate)."""
+    faults: tuple[str, ...] = ()
+    """Lockstep: the faults of the run (``NODE:kill@T``, ``NODE:stall@T:D``): from T on the graph no longer waits
+    for NODE (``moose launch --lockstep --fault``)."""
     ecu_minimum_risk: bool = True
     """``can`` bus: the emulated vehicle ECUs run the minimum-risk maneuver themselves when the commands stop
     (level 2 of :class:`moose.canbus.ecu.VehicleEcu`'s timeout, a requirement on the car's ECUs); ``false``
@@ -113,6 +124,11 @@ class SimulatorParams(ScenarioParams, CanBusParams):
 @dataclasses.dataclass(frozen=True)
 class ObserverNodeParams(ScenarioParams):
     """``observer``: the scenario gives the initial state."""
+
+
+@dataclasses.dataclass(frozen=True)
+class MotionNodeParams(ScenarioParams):
+    """``motion_controller``: the scenario gives the approach speed, the reference until the first plan acts."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -150,7 +166,7 @@ NODE_PARAMETERS: dict[str, type[NodeParams]] = {
     "mpc_planner": PlannerNodeParams,
     "msf_planner": PlannerNodeParams,
     "weight_fbl": WeightFblParams,
-    "motion_controller": NodeParams,
+    "motion_controller": MotionNodeParams,
     "can_bridge": CanBridgeParams,
 }
 """The parameter dataclass of every node of the graph (:data:`moose_ros.graph.NODES`)."""

@@ -45,6 +45,9 @@ def add_subparser(subparsers: Any) -> None:
                         help="what the nodes run on: rclpy (ROS 2; the interpreter of .venv-ros when this one has no "
                              "rclpy) or dds (Cyclone DDS); default: MOOSE_RUNTIME, else rclpy when importable here")
     launch.add_argument("--rate", type=positive_float, default=1.0, help="simulated seconds per wall-clock second")
+    launch.add_argument("--lockstep", action="store_true",
+                        help="step simulated time only when every node has handled the tick: the graph computes what "
+                             "moose simulate computes, at whatever speed the machine allows (--rate is not used)")
     launch.add_argument("--fault", action="append", default=[], metavar="NODE:kill@T|NODE:stall@T:D",
                         help="inject a fault: SIGKILL NODE at simulated time T, or SIGSTOP it at T for D simulated "
                              "seconds (repeatable)")
@@ -69,7 +72,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
         raise ParamError("--commonroad is not supported by moose launch: the nodes take the scenario as a name or "
                          "ad-hoc flags; run it with moose simulate --commonroad")
     scenario = scenario_from_args(args)
-    scenario_fields = [f.name for f in dataclasses.fields(ScenarioParams)]
+    scenario_fields = [f.name for f in dataclasses.fields(ScenarioParams) if f.name != "lockstep_nodes"]
     params = {k: getattr(args, k) for k in scenario_fields if getattr(args, k) is not None}
     params.update({f"can_{k}": getattr(args, f"can_{k}") for k in ("interface", "channel", "port")
                    if getattr(args, f"can_{k}") is not None})
@@ -82,7 +85,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
                                     else run_folder(scenario.name, planner) / "bag")
     try:
         summary = launch(scenario, params, graph=args.graph, planner=planner, seed=args.seed, params_file=args.config,
-                         rate=args.rate, bag=bag, faults=faults, runtime=args.runtime,
+                         rate=args.rate, bag=bag, faults=faults, runtime=args.runtime, lockstep=args.lockstep,
                          foxglove=(args.foxglove_host, args.foxglove) if args.foxglove is not None else None)
     except BagError as exc:
         raise ParamError(str(exc)) from None
@@ -112,7 +115,8 @@ def format_launch_summary(summary: dict[str, Any]) -> str:
                                                 for name, end in summary["node_status"].items()))
     rtf = summary["real_time_factor"]
     achieved = "n/a" if rtf["achieved"] is None else f"{rtf['achieved']:.2f}"
-    lines.append(f"real time       --rate {rtf['requested']:g}, achieved {achieved}")
+    requested = "--lockstep" if rtf["requested"] is None else f"--rate {rtf['requested']:g}"
+    lines.append(f"real time       {requested}, achieved {achieved}")
     misses = {n: c for n, c in summary["deadline_misses"].items() if c}
     lines.append(f"deadline misses {misses or 'none'}")
     lines.append(f"incidents       {len(summary['incidents'])}"

@@ -43,7 +43,21 @@ from ..graph import (
     Topic,
     subscribes,
 )
+from ..lockstep import (
+    DEPTH,
+    MATCH_RETRY,
+    QOS_DATA,
+    QOS_MARKER,
+    TICK_TYPE,
+    TickJoin,
+    listeners,
+    marker_message,
+    marker_time,
+    marker_topic,
+    tick_of,
+)
 from ..parameters import node_parameters
+from ..runtime.qos import Qos
 
 OK, WARN, ERROR = 0, 1, 2
 """diagnostic_msgs/DiagnosticStatus levels."""
@@ -126,12 +140,70 @@ class GraphNode:
         """Invalid messages dropped, by topic."""
         self._invalid_last: dict[str, tuple[float, str]] = {}
         """Topic → (clock of the last invalid message, its reason)."""
+        self.tick_period = self.config.motion_period
+        """The motion-control tick (s): the lockstep graph's step."""
+        self.tick_time: Optional[float] = None
+        """Lockstep: the simulated time of the tick being handled (``None`` in real time and before the first)."""
+        self.join: Optional[TickJoin] = None
+        self._handlers: dict[str, Callable[[Any], None]] = {}
+        self._published: list[str] = []
+        self._pubs: list[Any] = []
+        nodes = tuple(getattr(self.params, "lockstep_nodes", ()))
+        if nodes:  # lockstep (moose_ros.lockstep): supervision runs in each tick, not on a timer
+            self.join = TickJoin(self.name, nodes, [t.name for t in self.inputs_of()])
+            self._marker = rt.publisher(TICK_TYPE, marker_topic(self.name), QOS_MARKER)
+            self._pubs.append((self._marker, listeners(self.name, nodes)))
+            for upstream in self.join.waits:
+                rt.subscription(TICK_TYPE, marker_topic(upstream), self._on_marker, QOS_MARKER)
+            # the nodes run on no clock of their own in lockstep (the tick's time is theirs): this wall-clock timer
+            # only retries a tick that waited for discovery (nothing of tick 0 goes out before it is matched)
+            rt.timer(MATCH_RETRY, self._pump)
+        else:
+            rt.timer(SUPERVISION_PERIOD, self.supervise)
         rt.timer(1.0, self.publish_diagnostics)
-        rt.timer(SUPERVISION_PERIOD, self.supervise)
+
+    @property
+    def lockstep(self) -> bool:
+        """Whether this node runs in lockstep (``moose launch --lockstep``)."""
+        return self.join is not None
+
+    def inputs_of(self) -> list[Topic]:
+        """The data topics this node reads (what a lockstep tick carries)."""
+        from ..lockstep import data_topics
+
+        return data_topics(self.name)
+
+    def now(self) -> float:
+        """The node's simulated time: the tick being handled in lockstep, else the runtime's ROS time."""
+        return self.tick_time if self.tick_time is not None else float(self.rt.now())
+
+    def publisher(self, topic: Topic) -> Callable[[Any], None]:
+        """A publisher of ``topic`` on this node; in lockstep each message is announced in the tick's marker, and
+        the publisher offers :data:`moose_ros.lockstep.QOS_DATA` (nothing a lockstep reader waits for is lost)."""
+        if self.join is None:
+            return topic.publisher(self.rt)
+        qos = QOS_DATA if not topic.qos.transient_local else QOS_MARKER
+        pub = self.rt.publisher(topic.type, topic.name, qos)
+        nodes = tuple(getattr(self.params, "lockstep_nodes", ()))
+        self._pubs.append((pub, sum(1 for n in topic.subscribers if n in nodes and n != self.name)))
+        name = topic.name
+
+        def publish(msg: Any) -> None:
+            self._published.append(name)
+            pub(msg)
+
+        return publish
+
+    def matched(self) -> bool:
+        """Lockstep: every publisher of this node reaches every node of the graph that reads it (nothing of tick 0
+        may go to a reader not yet discovered)."""
+        return all(pub.subscription_count() >= count for pub, count in self._pubs)
 
     def clock(self) -> float:
-        """The node's clock for deadlines (s): simulated time with ``use_sim_time``, else the monotonic clock
-        (immune to wall-clock steps)."""
+        """The node's clock for deadlines (s): the tick's simulated time in lockstep, simulated time with
+        ``use_sim_time``, else the monotonic clock (immune to wall-clock steps)."""
+        if self.tick_time is not None:
+            return self.tick_time
         return self.rt.now() if getattr(self.rt, "use_sim_time", False) else time.monotonic()
 
     def subscribe(self, topic: Topic, handler: Callable[[Any], None]) -> Any:
@@ -146,12 +218,60 @@ class GraphNode:
             try:
                 record = convert(msg, now if clock_known else None)
             except cv.InvalidMessage as exc:
-                self.reject(name, str(exc))
+                if self.join is not None and name in self.join.topics:  # announced in a marker: counted there
+                    reason = str(exc)
+                    self.join.message(name, lambda: self.reject(name, reason))
+                    self._pump()
+                else:
+                    self.reject(name, str(exc))
                 return
-            self.inputs.seen(name, self.clock())
-            handler(record)
+            if self.join is not None and name in self.join.topics:
+                self.join.message(name, lambda: self._arrived(name, handler, record))
+                self._pump()
+            else:
+                self._arrived(name, handler, record)
 
+        if self.join is not None and name in self.join.topics:
+            return self.rt.subscription(topic.type, name, on_message, QOS_DATA if not topic.qos.transient_local
+                                        else Qos(reliable=True, depth=DEPTH, transient_local=True))
         return topic.subscription(self.rt, on_message)
+
+    def _arrived(self, name: str, handler: Callable[[Any], None], record: Any) -> None:
+        self.inputs.seen(name, self.clock())
+        handler(record)
+
+    # -- lockstep (moose_ros.lockstep) -------------------------------------------------------
+
+    def _on_marker(self, msg: Any) -> None:
+        assert self.join is not None
+        expected = tuple(msg.expected) if msg.node == "vehicle_simulator" else None
+        self.join.marker(msg.node, tick_of(marker_time(msg), self.tick_period), tuple(msg.topics), expected)
+        self._pump()
+
+    def _pump(self) -> None:
+        """Handle every tick that is complete (:meth:`moose_ros.lockstep.TickJoin.take`)."""
+        join = self.join
+        assert join is not None
+        while join.next > 0 or self.matched():
+            step = join.take()
+            if step is None:
+                return
+            k, items = step
+            self.tick_time = round(k * self.tick_period, 9)
+            for _topic, deliver in items:
+                deliver()
+            self.on_tick(self.tick_time)
+            self.supervise()
+            self.publish_marker(k)
+
+    def on_tick(self, t: float) -> None:
+        """Lockstep: what the node does at the tick ``t`` once its inputs of the tick are handed over (publish its
+        estimate, plan, command …).  Default: nothing."""
+
+    def publish_marker(self, k: int, expected: tuple[str, ...] = ()) -> None:
+        """Lockstep: announce that this node has published everything for tick ``k``."""
+        topics, self._published = self._published, []
+        self._marker(marker_message(self.rt.make, self.name, round(k * self.tick_period, 9), topics, expected))
 
     def reject(self, topic: str, reason: str) -> None:
         """Count a dropped message on ``topic`` and say why: the ``invalid:TOPIC`` problem (logged when it starts)."""
@@ -240,7 +360,10 @@ class GraphNode:
         """Release what the node holds beyond its runtime entities (a bus, a thread); called once at shutdown."""
 
     def stamp_time(self) -> float:
-        """The time that stamps this node's diagnostics: the node's ROS time (simulated with ``use_sim_time``)."""
+        """The time that stamps this node's diagnostics: the node's ROS time (simulated with ``use_sim_time``); in
+        lockstep the tick's (0 before the first)."""
+        if self.join is not None:
+            return self.tick_time or 0.0
         return float(self.rt.now())
 
     def publish_diagnostics(self) -> None:
@@ -255,8 +378,9 @@ class GraphNode:
         return MaxSteeringTable.build(self.config.model_vehicle, self.config.maneuver)
 
 
-def sensor_publishers(rt: Any, t0: float) -> dict[type, tuple[Callable[[Any], None], Callable[[Any, Any], Any]]]:
+def sensor_publishers(node: GraphNode, t0: float) -> dict[type, tuple[Callable[[Any], None],
+                                                                      Callable[[Any, Any], Any]]]:
     """Publisher and converter of each sensor sample type: the vehicle's sensor topics.  The sensor frames
     go on /tf_static once, stamped ``t0`` (transient local: late joiners get them)."""
-    TF_STATIC.publisher(rt)(cv.static_tf(rt, t0))
-    return {kind: (topic.publisher(rt), convert) for kind, (topic, convert) in cv.SENSOR_SAMPLES.items()}
+    TF_STATIC.publisher(node.rt)(cv.static_tf(node.rt, t0))
+    return {kind: (node.publisher(topic), convert) for kind, (topic, convert) in cv.SENSOR_SAMPLES.items()}

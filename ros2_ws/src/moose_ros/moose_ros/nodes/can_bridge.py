@@ -46,7 +46,7 @@ class CanBridge(GraphNode):
             self.runner.close()
             raise ParamError(f"can_interface {bus.interface!r}, can_channel {bus.channel!r}: the bus cannot be "
                              f"opened ({why}); the bridge does not start without its bus")
-        self.pub = sensor_publishers(rt, rt.now())
+        self.pub = sensor_publishers(self, rt.now())
         self.subscribe(ACTUATOR_COMMAND, self.on_command)
         rt.timer(COMMAND_PERIOD, self.tick)
         if not self.simulated:

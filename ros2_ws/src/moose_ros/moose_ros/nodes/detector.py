@@ -20,7 +20,7 @@ class Detector(GraphNode):
         super().__init__(rt)
         self.detector = ObstacleDetector(self.config.detector, self.table())
         self.obstacles: list = []
-        self.pub = THREAT.publisher(rt)
+        self.pub = self.publisher(THREAT)
         self.subscribe(OBSTACLES, lambda obstacles: setattr(self, "obstacles", obstacles))
         self.subscribe(STATE, self.on_state)
 
@@ -29,4 +29,7 @@ class Detector(GraphNode):
         self.report_stale(stale, ERROR)
 
     def on_state(self, estimate: StateEstimate) -> None:
-        self.pub(cv.threat_to_msg(self.rt, estimate.t, self.detector.update(estimate.t, estimate, self.obstacles)))
+        """The threat at the node's time (in lockstep the tick's; with a sensor delay the estimate is of an earlier
+        sample), as the lockstep loop detects at its tick."""
+        t = self.now()
+        self.pub(cv.threat_to_msg(self.rt, t, self.detector.update(t, estimate, self.obstacles)))

@@ -8,6 +8,7 @@ from moose.minimum_risk import ActuatorLimits, Command, MinimumRiskManeuver
 from moose.motion import MotionController
 from moose.signals import Reference, StateEstimate
 from moose.state import STEER_RATE, TORQUE_RL, TORQUE_RR
+from moose.timing import SteeringPredictor
 
 from .. import convert as cv
 from ..graph import (
@@ -51,7 +52,15 @@ class Motion(GraphNode):
         self.controller = MotionController(self.config.motion, self.config.model_vehicle)
         self.estimate: Optional[StateEstimate] = None
         self.reference: Optional[Reference] = None
+        self.cruise = Reference(0.0, self.params.load_scenario().v_init)
+        """The reference before the first plan acts: straight on at the approach speed (the lockstep loop's)."""
         self.delta = 0.0
+        self.delta_stamp = 0.0
+        """The measured steering angle and its sample's time."""
+        vehicle, timing = self.config.vehicle, self.config.timing
+        self.eps = (SteeringPredictor(timing.command_delay_s, self.config.motion_period, vehicle.delta_max,
+                                      vehicle.delta_rate_max) if timing.compensate else None)
+        """``timing.compensate``: the EPS loop closes on the angle its command will meet (the lockstep loop's)."""
         self.omega: Optional[float] = None
         self.dt = 1.0 / self.config.simulation.motion_rate_hz
         self.maneuver = MinimumRiskManeuver(self.config.minimum_risk, ActuatorLimits.from_vehicle(self.config.vehicle),
@@ -64,10 +73,10 @@ class Motion(GraphNode):
         self.health: dict[str, tuple[int, str, float]] = {}
         """Each essential upstream node's last status on /diagnostics: (level, message, arrival on our clock)."""
         self.late = 0
-        self.pub = ACTUATOR_COMMAND.publisher(rt)
+        self.pub = self.publisher(ACTUATOR_COMMAND)
         self.subscribe(STATE, self.on_state)
         self.subscribe(REFERENCE, lambda reference: setattr(self, "reference", reference))
-        self.subscribe(STEERING, lambda sample: setattr(self, "delta", sample.delta))
+        self.subscribe(STEERING, self.on_steering)
         self.subscribe(WHEEL_SPEEDS, lambda sample: setattr(self, "omega", 0.5 * (sample.omega_rl + sample.omega_rr)))
         self.subscribe(DIAGNOSTICS, self.on_diagnostics)
 
@@ -76,16 +85,34 @@ class Motion(GraphNode):
             if name in self.upstream:
                 self.health[name] = (level, message, self.clock())
 
+    def on_steering(self, sample: Any) -> None:
+        self.delta, self.delta_stamp = sample.delta, sample.t
+
     def on_state(self, estimate: StateEstimate) -> None:
         self.estimate = estimate
-        lag = self.rt.now() - estimate.t
+        if not self.lockstep:
+            self.command(estimate)
+
+    def on_tick(self, t: float) -> None:
+        """Lockstep: the command of the tick, from its estimate, reference and steering angle (the lockstep loop's)."""
+        if self.estimate is not None:
+            self.command(self.estimate)
+
+    def command(self, estimate: StateEstimate) -> None:
+        """Command from ``estimate`` with the newest reference and steering angle."""
+        now = self.now()
+        lag = now - estimate.t
         if lag > CONTROL_LAG_MAX + 1e-9:
             self.deadline_misses += 1
             self.late += 1
         if self.reasons or lag > STATE.deadline + 1e-9:  # type: ignore[operator]
             return
-        reference = self.reference or Reference(0.0, estimate.vx)
-        u = self.controller.step(reference, estimate, self.delta, self.dt)
+        reference = self.reference or self.cruise
+        if self.eps is None:
+            u = self.controller.step(reference, estimate, self.delta, self.dt)
+        else:
+            u = self.controller.step(reference, estimate, self.eps.predict(self.delta, self.delta_stamp, now), self.dt)
+            self.eps.record(now, float(u[STEER_RATE]))
         self.last = Command(reference.delta, float(u[STEER_RATE]), float(u[TORQUE_RL]), float(u[TORQUE_RR]))
         self.pub(cv.actuator_to_msg(self.rt, estimate.t, reference, u))
 

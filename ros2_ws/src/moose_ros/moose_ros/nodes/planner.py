@@ -34,13 +34,14 @@ class PlannerNode(GraphNode):
         self.blocked = False
         """The estimate or the threat is stale: no plan (the plan topic falls silent, weight_fbl applies the
         other planner's)."""
-        self.pub = PLANS[self.kind].publisher(rt)
+        self.pub = self.publisher(PLANS[self.kind])
         self.subscribe(STATE, lambda estimate: setattr(self, "estimate", estimate))
         self.subscribe(THREAT, self.on_threat)
         self.period = self.config.planning.t_s
         self.next_plan = 0.0
         """Time of the next planning instant: every t_s, restarted by a new obstacle (as the lockstep loop)."""
-        rt.timer(1.0 / self.config.simulation.motion_rate_hz, self.on_tick)
+        if not self.lockstep:  # in lockstep the tick comes from the graph (GraphNode.on_tick)
+            rt.timer(1.0 / self.config.simulation.motion_rate_hz, lambda: self.on_tick(self.rt.now()))
 
     def on_inputs(self, stale: dict[str, Optional[float]], now: float) -> None:
         """No plan on a stale estimate or threat (ERROR); a stale blend only costs the MPC its warm start (WARN)."""
@@ -59,11 +60,10 @@ class PlannerNode(GraphNode):
             self.plan(threat.t)
             self.next_plan = threat.t + self.period
 
-    def on_tick(self) -> None:
+    def on_tick(self, now: float) -> None:
         """The motion-rate tick: plan when the planning instant is due, stamped with the instant itself, so
         that both planners' plans of one instant carry one stamp even when a tick runs late (instants a
         stalled node missed entirely are skipped, not made up)."""
-        now = self.rt.now()
         if now >= self.next_plan - 1e-6:
             instant = self.next_plan
             self.next_plan += self.period * (math.floor((now + 1e-6 - instant) / self.period) + 1)  # the next due
@@ -78,7 +78,7 @@ class PlannerNode(GraphNode):
         """Plan at ``t`` (default: now) from the newest estimate."""
         if self.estimate is None or self.blocked:
             return
-        t = self.rt.now() if t is None else t
+        t = self.now() if t is None else t
         inp = PlannerInput(t, self.estimate, self.threat, self.v_des, self.guess, y_lane=0.0)
         result = self.planner.plan(inp)
         if result.solve_time_s > self.config.planning.t_s:  # the planning slot is over before the plan exists

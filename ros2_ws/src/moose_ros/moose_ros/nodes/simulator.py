@@ -12,11 +12,14 @@ from moose.minimum_risk import ActuatorLimits, Command, MinimumRiskManeuver
 from moose.sensors import Sensors
 from moose.signals import ActuatorCommand, EpsSample, WheelSpeedSample
 from moose.state import VX, X, Y
+from moose.timing import CommandHold, DelayLine
 from moose.vehicle import VehiclePlant, initial_state
 
 from .. import convert as cv
+from ..faults import Fault
 from ..graph import ACTUATOR_COMMAND, CLOCK, DIAGNOSTICS, OBSTACLES, ODOM, TF
-from .base import WARN, GraphNode, sensor_publishers
+from ..lockstep import MATCH_RETRY, ROOT, STUCK_TIMEOUT, tick_of
+from .base import ERROR, WARN, GraphNode, sensor_publishers
 
 
 class TopicVehicleIo:
@@ -30,15 +33,17 @@ class TopicVehicleIo:
     """
 
     def __init__(self, node: "VehicleSimulator") -> None:
-        rt = node.rt
         self.node = node
         self.guard = CommandGuard(GuardParams.from_vehicle(node.config.vehicle, timeout=node.params.command_timeout,
                                                            maneuver=node.config.minimum_risk), period=node.dt)
-        self.pub = sensor_publishers(rt, 0.0)  # simulated time starts at 0
+        self.pub = sensor_publishers(node, 0.0)  # simulated time starts at 0
+        # the command path's delay (moose.timing): a command computed at t reaches the guard at t + d_c
+        self.hold: CommandHold[Command] = CommandHold(node.config.timing.command_delay_s, node.dt)
         node.subscribe(ACTUATOR_COMMAND, self.on_command)
 
     def on_command(self, c: ActuatorCommand) -> None:
-        self.guard.receive(Command(c.steering_angle, c.steering_rate, c.torque_rl, c.torque_rr))
+        """A command, computed at the simulator's current tick (in lockstep: the tick it was made for)."""
+        self.hold.push(self.node.t, Command(c.steering_angle, c.steering_rate, c.torque_rl, c.torque_rr))
 
     def send(self, sample: Any, t: float) -> None:
         if isinstance(sample, EpsSample):
@@ -52,6 +57,8 @@ class TopicVehicleIo:
         """Nothing to release: topics go with the node."""
 
     def command(self, t: float) -> np.ndarray:
+        for command in self.hold.arrivals(t):
+            self.guard.receive(command)
         out = self.guard.output(t)
         if self.guard.state in (GuardState.MINIMUM_RISK, GuardState.STOPPED):
             done = "stopped by" if self.guard.state == GuardState.STOPPED else "running"
@@ -118,15 +125,25 @@ class VehicleSimulator(GraphNode):
         self.appeared = False
         self.finished = False
         self.pub = {"clock": CLOCK.publisher(rt), "odom": ODOM.publisher(rt), "tf": TF.publisher(rt),
-                    "obstacles": OBSTACLES.publisher(rt)}
+                    "obstacles": self.publisher(OBSTACLES)}
+        self.stepped = False
+        """The plant has taken a step (its specific force is the IMU's)."""
+        # the sensor path's delay (moose.timing): a sample handed over at t reaches the observer at t + d_s
+        self.in_transit: DelayLine = DelayLine(self.config.timing.sensor_delay_s, self.dt)
+        self.nodes = tuple(self.params.lockstep_nodes)
+        self.faults = [Fault.parse(text) for text in self.params.faults]
+        self.progress: Optional[float] = None
+        """Lockstep: wall-clock time of the last tick (``None`` before simulated time starts)."""
         self.io = CanVehicleIo(self) if self.params.vehicle_bus == "can" else TopicVehicleIo(self)
         # simulated time starts once every node named in ``wait_for`` has reported (startup of the graph)
         self.waiting = set(self.params.wait_for)
         self.startup_deadline = self.params.startup_timeout
         self.wall_start: Optional[float] = None
         self.subscribe(DIAGNOSTICS, self.on_diagnostics)
-        # wall-clock pacing: one motion step every dt / rate seconds; simulated time is published on /clock
-        rt.timer(self.dt / self.params.rate, self.step)
+        if self.lockstep:  # the graph paces simulated time (moose_ros.lockstep)
+            rt.timer(MATCH_RETRY, self.lockstep_timer)
+        else:  # wall-clock pacing: one motion step every dt / rate seconds; simulated time is published on /clock
+            rt.timer(self.dt / self.params.rate, self.step)
 
     def stamp_time(self) -> float:
         """Simulated time, as every other message of the simulator: it is the graph's clock, not on
@@ -142,22 +159,78 @@ class VehicleSimulator(GraphNode):
         for name, _level, _message in statuses:
             self.waiting.discard(name)
 
-    def step(self) -> None:
-        if self.finished:
-            return
+    def expected(self, t: float) -> tuple[str, ...]:
+        """Lockstep: the nodes the graph waits for at ``t`` (the fault plan: a faulted node drops out at its fault's
+        time for the rest of the run)."""
+        return tuple(n for n in self.nodes if not any(f.node == n and t >= f.at - 1e-9 for f in self.faults))
+
+    def started(self) -> bool:
+        """Whether simulated time runs: every node named in ``wait_for`` has reported (or the start-up timeout
+        passed), and in lockstep every publisher reaches its readers."""
         if self.waiting:
             self.wall_start = self.wall_start or time.monotonic()
             if time.monotonic() - self.wall_start < self.startup_deadline:
-                return
+                return False
             self.rt.log_warn(f"starting without {sorted(self.waiting)}: not up after {self.startup_deadline} s")
             self.waiting.clear()
+        return self.lockstep is False or self.matched()
+
+    def step(self) -> None:
+        """Real time: one motion tick per timer period (``rate``)."""
+        if self.finished or not self.started():
+            return
+        self.publish_tick()
+        self.advance()
+
+    def lockstep_timer(self) -> None:
+        """Lockstep: start simulated time when the graph is up, and end a run whose graph stopped reporting."""
+        if self.finished:
+            return
+        if self.progress is None:
+            if self.started():
+                self.progress = time.monotonic()
+                self.publish_tick()
+            return
+        waited = time.monotonic() - self.progress
+        if waited > STUCK_TIMEOUT:
+            assert self.join is not None
+            k = self.join.next
+            missing = [n for n, lag in self.join.waits.items() if n in self.expected(self.t)
+                       and k - lag not in self.join.markers[n]]
+            self.problem("lockstep_stuck", ERROR, f"lockstep stuck at t = {self.t:.2f} s: no tick from "
+                                                  f"{', '.join(missing) or 'the graph'} for {waited:.0f} s")
+            self.finish("stuck")
+
+    def _pump(self) -> None:
+        """Lockstep: step the plant past tick k once every expected node has reported it (with its commands)."""
+        join = self.join
+        assert join is not None
+        while not self.finished and self.progress is not None:
+            step = join.take()
+            if step is None:
+                return
+            for _topic, deliver in step[1]:
+                deliver()
+            self.advance()
+            if self.finished:
+                return
+            self.progress = time.monotonic()
+            self.publish_tick()
+            self._publish_on_change()
+
+    def publish_tick(self) -> None:
+        """Tick k: the clock, the samples due (after the sensor delay), ground truth, the obstacle when it appears;
+        in lockstep the root marker last."""
         rt, t = self.rt, self.t
         clock = rt.make(CLOCK.type)
         clock.clock.sec, clock.clock.nanosec = int(math.floor(t)), int(round((t - math.floor(t)) * 1e9)) % 1_000_000_000
         self.pub["clock"](clock)
         state = self.plant.state
-        u = self.io.command(t)
-        for sample in self.sensors.sample(t, state, self.plant.imu_specific_force(state, u)):
+        # the IMU's specific force of the step that led here (at t = 0: the cruise, no command yet), as the loop's
+        force = self.plant.specific_force if self.stepped else self.plant.imu_specific_force(state, np.zeros(3))
+        for sample in self.sensors.sample(t, state, force):
+            self.in_transit.push(t, sample)
+        for sample in self.in_transit.pop_due(t):
             self.io.send(sample, t)
         self.pub["odom"](cv.odometry_to_msg(rt, t, state))
         self.pub["tf"](cv.truth_tf(rt, t, state))
@@ -165,12 +238,26 @@ class VehicleSimulator(GraphNode):
             self.appeared = True
             self.pub["obstacles"](cv.obstacles_to_msg(rt, t, [self.scenario.danger_zone]))
         self.values = {"t": f"{t:.2f}", "x": f"{state[X]:.2f}", "y": f"{state[Y]:.2f}"}
+        if self.join is not None:
+            expected = self.expected(t)
+            k = tick_of(t, self.dt)
+            self.join.marker(ROOT, k, (), expected)
+            self.publish_marker(k, expected)
+
+    def advance(self) -> None:
+        """The command acting at the current tick drives the plant to the next one; the run ends at its end."""
+        t = self.t
+        u = self.io.command(t)
         if t >= self.end - 1e-9:
-            self.finished = True
-            self.message = "finished"
-            self.publish_diagnostics()
-            self.io.close()
-            rt.shutdown()
+            self.finish("finished")
             return
         self.plant.step(u, self.steps)
+        self.stepped = True
         self.t = round(t + self.dt, 9)
+
+    def finish(self, message: str) -> None:
+        self.finished = True
+        self.message = message
+        self.publish_diagnostics()
+        self.io.close()
+        self.rt.shutdown()

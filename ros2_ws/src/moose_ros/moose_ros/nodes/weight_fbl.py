@@ -46,9 +46,9 @@ class WeightFbl(GraphNode):
         """The newest plan of each planner: (stamp, planned against a threat, plan)."""
         self.blended = -math.inf
         """Stamp of the last blended instant."""
-        self.pub_blend = BLEND.publisher(rt)
-        self.pub_ref = REFERENCE.publisher(rt)
-        self.pub_markers = MARKERS.publisher(rt)
+        self.pub_blend = self.publisher(BLEND)
+        self.pub_ref = self.publisher(REFERENCE)
+        self.pub_markers = self.publisher(MARKERS)
         self.subscribe(STATE, self.on_state)
         self.subscribe(THREAT, lambda threat: setattr(self, "threat", threat))
         self.subscribe(PLAN_MPC, lambda plan: self.on_plan("mpc", plan))
@@ -87,7 +87,7 @@ class WeightFbl(GraphNode):
             if mpc and msf and abs(mpc[0] - msf[0]) < 1e-6 and mpc[1] == msf[1]:
                 pass  # the two plans of one instant, made against the same threat (a planner that planned on
                 # its timer just before the threat arrived re-plans at the same stamp: wait for that plan)
-            elif msf and self.rt.now() >= msf[0] + self.mpc_timeout - 1e-9:
+            elif msf and self.now() >= msf[0] + self.mpc_timeout - 1e-9:
                 mpc, late = None, True  # no MPC plan for this instant in time: weight 0
             else:
                 return
@@ -103,9 +103,10 @@ class WeightFbl(GraphNode):
         self.blended = t
         self.values = {"weight_mpc": f"{record.blend.weight_mpc:.3f}", "planners": ",".join(self.live)}
         self.pub_blend(cv.blend_to_msg(self.rt, t, record.blend, record.reference, record.delta_mpc))
-        reference = self.step.reference_at(t, self.estimate)  # the plan acts from t + timing.planning_delay_s
-        if reference is not None:
-            self.pub_ref(cv.reference_to_msg(self.rt, t, reference))
+        if not self.lockstep:  # in lockstep the tick publishes the reference once, after the tick's plans
+            reference = self.step.reference_at(t, self.estimate)  # the plan acts from t + timing.planning_delay_s
+            if reference is not None:
+                self.pub_ref(cv.reference_to_msg(self.rt, t, reference))
         self.pub_markers(cv.markers_to_msg(self.rt, t, record.threat, record.mpc, record.msf,
                                            blend_path(record.blend, self.estimate, self.step.grid.t_s)))
 
@@ -113,6 +114,17 @@ class WeightFbl(GraphNode):
         self.estimate = estimate
         if self.pending:
             self.try_blend()
-        reference = self.step.reference_at(self.estimate.t, self.estimate)
-        if reference is not None and not self.blocked:  # per estimate (the topic's designed rate)
-            self.pub_ref(cv.reference_to_msg(self.rt, self.estimate.t, reference))
+        if not self.lockstep:
+            self.publish_reference(self.now())
+
+    def on_tick(self, t: float) -> None:
+        """Lockstep: the reference of the tick, after the plans of its instant (as the lockstep loop's)."""
+        if self.estimate is not None:
+            self.publish_reference(t)
+
+    def publish_reference(self, t: float) -> None:
+        """δ* re-evaluated with the newest estimate at ``t`` (the topic's designed rate, per estimate or tick)."""
+        assert self.estimate is not None
+        reference = self.step.reference_at(t, self.estimate)
+        if reference is not None and not self.blocked:
+            self.pub_ref(cv.reference_to_msg(self.rt, t, reference))

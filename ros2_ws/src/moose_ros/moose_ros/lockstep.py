@@ -1,0 +1,181 @@
+"""The lockstep graph (``moose launch --lockstep``): every node computes each simulated tick from exactly the
+messages of that tick, so the graph computes what ``moose simulate`` computes, whatever the machine's speed.
+
+**Protocol.**  A node in lockstep publishes, after its outputs of tick k, a marker ``moose_msgs/msg/Tick`` on
+``/lockstep/<node>`` (:func:`marker_topic`): the tick's stamp and the topic of every message it published for
+that tick, in publication order.  The simulator's marker of tick k (the *root*) also names the nodes the graph
+waits for at tick k (its fault plan: a node killed or stalled at simulated t drops out from t on).
+
+* The simulator publishes the sensor samples of tick k (those the sensor delay makes due at k), the obstacle
+  when it appears, and its marker k; it steps the plant to k + 1 only when every expected node has reported
+  tick k (:class:`TickJoin`), with the commands of tick k through the command delay
+  (:class:`moose.timing.CommandHold`).
+* Every other node handles tick k when the root marker k and the markers of its upstream nodes
+  (:func:`waits`: the publishers of its inputs; of tick k for those before it in :data:`PIPELINE`, of tick
+  k − 1 for the feedback from those after it, the blend the MPC warm-starts from, the commands the simulator
+  applies) have arrived, with every message they announce.  It then hands those messages to its callbacks in a
+  fixed order (feedback first, then each upstream node in pipeline order, each in its publication order), runs
+  its tick (the planning instants due, the estimate, the reference, the command), supervises its inputs on the
+  tick's simulated time, and publishes its marker.
+* The delays are the timing model's, where the car has them: the sensor delay in the simulator
+  (:class:`moose.timing.DelayLine`), the planning delay in ``weight_fbl``'s planning step, the command delay in
+  the simulator (or the ECU emulator); no delay is left to the scheduler.
+
+Markers and the data a lockstep node reads are reliable with a keep-last depth of :data:`DEPTH`; the markers are
+transient local (a late joiner still sees them).  A node the root marker does not expect (faulted) runs
+unsynchronised: it handles whatever arrived, and who reads it takes its messages as they come.  A graph that
+stops reporting (a node that never publishes its marker) is not waited for forever: the simulator gives up after
+:data:`STUCK_TIMEOUT` seconds of wall-clock time with the ``lockstep_stuck`` error and ends the run.
+"""
+from __future__ import annotations
+
+from collections import deque
+from typing import Any, Callable, Collection, Optional
+
+from .graph import CLOCK, DIAGNOSTICS, Topic, subscribes
+from .runtime.qos import Qos
+
+TICK_TYPE = "moose_msgs/msg/Tick"
+ROOT = "vehicle_simulator"
+"""The node that owns simulated time and whose marker opens every tick."""
+PIPELINE: tuple[str, ...] = ("vehicle_simulator", "can_bridge", "observer", "obstacle_detector", "mpc_planner",
+                             "msf_planner", "weight_fbl", "motion_controller")
+"""The order in which a tick flows through the graph (paper Fig. 3): a node reads tick k of the nodes before it
+and tick k − 1 of the nodes after it."""
+DEPTH = 100
+"""Keep-last depth of the markers and of every input a lockstep node reads (a tick carries a few messages)."""
+QOS_MARKER = Qos(reliable=True, depth=DEPTH, transient_local=True)
+QOS_DATA = Qos(reliable=True, depth=DEPTH)
+"""What a lockstep node's data publishers offer and its subscriptions request: nothing may be lost, since a
+node waits for every message a marker announces."""
+MATCH_RETRY = 0.02
+"""Wall-clock period (s) at which a lockstep node retries a tick it could not handle yet (discovery at start)."""
+STUCK_TIMEOUT = 90.0
+"""Wall-clock seconds the simulator waits for one tick before it ends the run with ``lockstep_stuck``."""
+
+
+def marker_topic(node: str) -> str:
+    """``/lockstep/<node>``."""
+    return f"/lockstep/{node}"
+
+
+def data_topics(node: str) -> list[Topic]:
+    """The inputs of ``node`` that carry a tick's data (not the clock, not health)."""
+    return [t for t in subscribes(node) if t is not CLOCK and t is not DIAGNOSTICS]
+
+
+def waits(node: str, nodes: Collection[str]) -> dict[str, int]:
+    """Whose markers ``node`` waits for before it handles tick k, and the lag of each (the marker of tick k − lag),
+    in the order their messages are handed over: feedback (lag 1) first, then pipeline order.  The simulator
+    waits for every other node's tick k before it steps past k; every other node for the root's tick k."""
+    if node == ROOT:
+        return {n: 0 for n in PIPELINE if n in nodes and n != ROOT}
+    position = PIPELINE.index(node)
+    out: dict[str, int] = {ROOT: 0}
+    for topic in data_topics(node):
+        for publisher in topic.publishers:
+            if publisher in nodes and publisher != node:
+                out[publisher] = 0 if PIPELINE.index(publisher) < position else 1
+    return dict(sorted(out.items(), key=lambda item: (-item[1], PIPELINE.index(item[0]))))
+
+
+def listeners(node: str, nodes: Collection[str]) -> int:
+    """How many nodes of the graph read ``node``'s marker."""
+    return sum(1 for other in nodes if other != node and node in waits(other, nodes))
+
+
+def tick_of(t: float, period: float) -> int:
+    """The tick index of simulated time ``t``."""
+    return int(round(t / period))
+
+
+class TickJoin:
+    """Which tick a lockstep node may handle next, and the messages it hands over for it (see the module
+    docstring).  Pure bookkeeping, no middleware: the node feeds it every input message (:meth:`message`) and
+    every marker (:meth:`marker`) as they arrive, and :meth:`take` returns the next complete tick."""
+
+    def __init__(self, node: str, nodes: Collection[str], topics: Collection[str]) -> None:
+        self.node = node
+        self.waits = waits(node, nodes)
+        self.topics = frozenset(topics)
+        """The topics this node reads (its queues)."""
+        publishers: dict[str, list[str]] = {}
+        for topic in data_topics(node):
+            if topic.name in self.topics:
+                for publisher in topic.publishers:
+                    publishers.setdefault(publisher, []).append(topic.name)
+        self.publishes = publishers
+        """Upstream node → the topics of it this node reads."""
+        self.queues: dict[str, deque[Any]] = {name: deque() for name in self.topics}
+        self.markers: dict[str, dict[int, tuple[str, ...]]] = {n: {} for n in self.waits}
+        self.expected: dict[int, frozenset[str]] = {}
+        """Tick → the nodes the graph waits for (the root's markers; the simulator's own plan)."""
+        self.next = 0
+        """The tick to handle next."""
+
+    def message(self, topic: str, item: Any) -> None:
+        """A message on ``topic`` (an input of this node) arrived."""
+        self.queues[topic].append(item)
+
+    def marker(self, node: str, tick: int, topics: tuple[str, ...], expected: Optional[Collection[str]]) -> None:
+        """The marker of ``node`` for ``tick`` arrived (``expected``: the root's, else ``None``)."""
+        if expected is not None:
+            self.expected[tick] = frozenset(expected)
+        if node in self.markers and tick >= self.next - 1:
+            self.markers[node][tick] = topics
+
+    def synchronised(self, tick: int) -> bool:
+        """Whether this node is waited for at ``tick`` (``True`` until the root says otherwise)."""
+        expected = self.expected.get(tick)
+        return expected is None or self.node in expected
+
+    def take(self) -> Optional[tuple[int, list[tuple[str, Any]]]]:
+        """The next tick and its messages in hand-over order, or ``None`` while something is missing."""
+        k = self.next
+        expected = self.expected.get(k)
+        if expected is None:
+            return None
+        order: list[tuple[str, int]] = []  # (topic, count) in hand-over order
+        flush: list[str] = []
+        for node, lag in self.waits.items():
+            tick = k - lag
+            if tick < 0:
+                continue
+            if node != ROOT and (node not in self.expected.get(tick, expected) or self.node not in expected):
+                flush.extend(self.publishes.get(node, ()))  # unsynchronised: whatever came
+                continue
+            topics = self.markers[node].get(tick)
+            if topics is None:
+                return None
+            need: dict[str, int] = {}
+            for topic in topics:
+                if topic in self.queues:
+                    need[topic] = need.get(topic, 0) + 1
+                    order.append((topic, 1))
+            if any(len(self.queues[topic]) < n for topic, n in need.items()):
+                return None
+        items = [(topic, self.queues[topic].popleft()) for topic, _ in order]
+        for topic in flush:
+            queue = self.queues[topic]
+            while queue:
+                items.append((topic, queue.popleft()))
+        for node, lag in self.waits.items():
+            self.markers[node].pop(k - lag, None)
+        self.expected = {tick: nodes for tick, nodes in self.expected.items() if tick >= k - 1}
+        self.next = k + 1
+        return k, items
+
+
+def marker_message(make: Callable[..., Any], node: str, t: float, topics: list[str],
+                   expected: Collection[str] = ()) -> Any:
+    """The ``Tick`` message of ``node`` for the tick at simulated time ``t``."""
+    import math
+
+    sec = int(math.floor(t))
+    stamp = make("builtin_interfaces/msg/Time", sec=sec, nanosec=int(round((t - sec) * 1e9)) % 1_000_000_000)
+    return make(TICK_TYPE, stamp=stamp, node=node, topics=list(topics), expected=sorted(expected))
+
+
+def marker_time(msg: Any) -> float:
+    """The simulated time of a ``Tick`` message."""
+    return float(msg.stamp.sec) + 1e-9 * float(msg.stamp.nanosec)
