@@ -8,20 +8,14 @@
   ``/vehicle/odom`` and ``/vehicle/imu``.
 - Mixed: the simulator and observer on rclpy/Fast DDS, the detector, planners, weight function and
   controller on Cyclone DDS, and the launcher's monitor on Cyclone: sensor data, the state estimate,
-  ``/clock``, the obstacle (transient local) and diagnostics cross from Fast DDS to Cyclone, the
-  actuator commands and the nodes' start-up diagnostics (transient local) from Cyclone to Fast DDS.
+  the lockstep markers, the obstacle (transient local) and diagnostics cross from Fast DDS to Cyclone, the
+  actuator commands, the markers and the nodes' start-up diagnostics (transient local) from Cyclone to Fast DDS.
 
-Both runs are compared with the lockstep simulation of the same paper case (``moose simulate``):
-these tests check that the graph computes the same thing on rclpy, not how fast (that is
-``bench/bench_graph.py``'s job).  The graph is paced by the wall clock, so its deviation from
-lockstep grows with the latency of each hop against the 10 ms tick; on this 2-core machine shared
-with other jobs (load averages of 12–19 seen) rclpy's hops reached p99 50–80 ms, the simulator's
-command guard fired (commands older than 50 ms), and a run at real time kept 0.99 m of clearance
-against 2.01 m in lockstep; at half speed a mixed run during the whole suite kept 1.73 m.  The
-runs therefore go at a quarter of real time (``rate`` 0.25: 40 ms of wall time per tick), and the
-case is the extreme series at τ = 2 s (7 m/s; 2.0 m clearance in lockstep): in the τ = 1.4 s case
-the outcome is decided by one-tick races (docs/design.md, "The graph on rclpy"), which a test
-cannot control.
+Both graphs run in lockstep (``moose launch --lockstep``) on the extreme case (7 m/s, τ = 1.4 s) and are held
+to what ``moose simulate`` computes with the same timing (tests/lockstep_reference.py): these tests check that the
+graph computes the same thing on rclpy, not how fast (that is ``bench/bench_graph.py``'s and
+``bench/bench_realtime.py``'s job).  What a ROS 2 user sees of the graph (names, types, QoS, parameters, samples)
+is checked on a real-time run, which asserts only what holds under load: it starts, runs, stops and reports.
 Every process is on loopback (``tests/ros2_prefix.py``) in the test run's domain and bounded in time.
 """
 from __future__ import annotations
@@ -37,21 +31,20 @@ from typing import Any
 
 import pytest
 
-from moose.config import load_config
-from moose.metrics import summarize
+from lockstep_reference import assert_reproduces, reference
 from moose.scenario import load_scenario
-from moose.simulation import simulate
 from moose_ros.graph import FRAME_IMU, FRAME_ODOM, FRAME_TRUTH, GRAPHS, TOPICS
 from moose_ros.interfaces import typestore
 from moose_ros.launch import node_overrides
 
-pytestmark = [pytest.mark.graph, pytest.mark.slow, pytest.mark.realtime]
+pytestmark = [pytest.mark.graph, pytest.mark.slow]
 
 SCENARIO = "paper_v7_tau2"
-RATE = 0.25
-"""Simulated seconds per wall-clock second (see the module docstring)."""
+"""The real-time run's case (2.0 m of clearance: what it shows does not depend on a race)."""
+EXTREME = "paper_v7_tau1.4"
+"""The lockstep runs' case."""
 LIMIT = 240.0
-"""Seconds a graph run may take here (about 45 s: start-up, then 9 simulated seconds at a quarter speed)."""
+"""Seconds a graph run may take here (about 30–60 s: start-up, then 9 simulated seconds)."""
 
 PROBE = textwrap.dedent(r'''
     import json, sys, time
@@ -117,14 +110,10 @@ MIXED = textwrap.dedent(r'''
     from moose_ros.launch import launch
     out = io.StringIO()
     summary = launch(load_scenario(sys.argv[1]), {"scenario": sys.argv[1]}, out=out, bag=sys.argv[3],
-                     runtime=json.loads(sys.argv[2]), rate=float(sys.argv[4]))
+                     runtime=json.loads(sys.argv[2]), lockstep=True)
     print(out.getvalue())
     print(json.dumps(summary))
 ''')
-
-
-def lockstep() -> dict[str, Any]:
-    return summarize(simulate(load_config(), load_scenario(SCENARIO), "combined"))
 
 
 def run(cmd: list[str], env: dict[str, str], timeout: float) -> subprocess.CompletedProcess:
@@ -144,18 +133,10 @@ def run(cmd: list[str], env: dict[str, str], timeout: float) -> subprocess.Compl
     return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
 
 
-def check_outcome(summary: dict[str, Any], reference: dict[str, Any]) -> None:
-    """The graph's verdict and threat equal the lockstep run's within the graph's timing: detection may
-    lag one or two 10 ms ticks (transport hops), which moves τ by up to 0.02 s and the path a little."""
-    facts = {k: summary[k] for k in ("min_clearance_m", "tau_s", "nu", "max_lateral_offset_m", "diagnostics")}
-    assert summary["collided"] is reference["collided"] is False, facts
-    assert summary["left_field"] is reference["left_field"] is False
-    assert summary["passed_obstacle"] is reference["passed_obstacle"] is True
-    assert summary["tau_s"] == pytest.approx(reference["tau_s"], abs=0.025)
-    assert summary["nu"] == pytest.approx(reference["nu"], abs=0.05)
-    assert summary["min_clearance_m"] == pytest.approx(reference["min_clearance_m"], abs=0.2), facts
-    assert summary["max_lateral_offset_m"] == pytest.approx(reference["max_lateral_offset_m"], abs=0.3), facts
-    assert summary["odom_samples"] > 800  # 9 s at 100 Hz, seen by the monitor
+def check_ran(summary: dict[str, Any]) -> None:
+    """A real-time run started, ran, stopped and reported (what holds under load)."""
+    assert summary["outcome"] in ("clear", "collision", "left_field", "lost_control", "stopped_short")
+    assert summary["odom_samples"] > 100  # simulated time ran, seen by the monitor
     # the simulator finished; every other node ran until the launcher stopped it (SIGTERM: rclpy exits 0,
     # a Cyclone node is ended by the signal)
     assert summary["node_exits"]["vehicle_simulator"] == 0
@@ -175,8 +156,18 @@ def read_odometry(bag: Path) -> list[tuple[float, float]]:
     return sorted(rows)
 
 
-def test_full_graph_on_rclpy_reproduces_the_lockstep_outcome_and_is_what_ros2_shows(
-        ros_env: dict[str, str], tmp_path: Path) -> None:
+def test_full_graph_on_rclpy_reproduces_the_lockstep_loop(ros_env: dict[str, str], tmp_path: Path) -> None:
+    result = run([ros_env["MOOSE_ROS_PYTHON"], "-m", "moose.cli", "launch", "--runtime", "rclpy", "--scenario",
+                  EXTREME, "--lockstep", "--json", str(tmp_path / "summary.json"), "--no-bag"], ros_env, LIMIT)
+    assert result.returncode == 0, result.stderr[-3000:]
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["runtime"] == {**{n: "rclpy" for n in GRAPHS["full"]}, "moose_monitor": "rclpy"}
+    assert not summary["degraded"] and summary["odom_samples"] == 901
+    assert_reproduces(summary, reference(load_scenario(EXTREME)))
+
+
+@pytest.mark.realtime
+def test_the_real_time_graph_on_rclpy_is_what_ros2_shows(ros_env: dict[str, str], tmp_path: Path) -> None:
     nodes = list(GRAPHS["full"])
     queries = {"observer": ["use_sim_time", "scenario", "simulation.planner", "vehicle.mu"],
                "vehicle_simulator": ["use_sim_time", "scenario", "seed", "rate", "vehicle_bus", "wait_for"],
@@ -188,9 +179,9 @@ def test_full_graph_on_rclpy_reproduces_the_lockstep_outcome_and_is_what_ros2_sh
     try:
         bag = tmp_path / "bag"
         result = run([ros_env["MOOSE_ROS_PYTHON"], "-m", "moose.cli", "launch", "--runtime", "rclpy", "--scenario",
-                      SCENARIO, "--rate", str(RATE), "--json", str(tmp_path / "summary.json"), "--bag", str(bag)],
+                      SCENARIO, "--json", str(tmp_path / "summary.json"), "--bag", str(bag)],
                      ros_env, LIMIT)
-        assert result.returncode == 0, result.stderr[-3000:]
+        assert result.returncode in (0, 1, 4), result.stderr[-3000:]  # a verdict, perhaps degraded under load
         try:
             seen, probe_err = probe.communicate(timeout=60)
         except subprocess.TimeoutExpired:
@@ -201,7 +192,7 @@ def test_full_graph_on_rclpy_reproduces_the_lockstep_outcome_and_is_what_ros2_sh
             probe.wait()
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["runtime"] == {**{n: "rclpy" for n in nodes}, "moose_monitor": "rclpy"}
-    check_outcome(summary, lockstep())
+    check_ran(summary)
     assert "starting without" not in result.stdout  # every node announced itself on /diagnostics in time
     # every node confined on Fast DDS: each checked that its participant's UDP sockets are all on 127.0.0.1
     for name in nodes:
@@ -240,13 +231,13 @@ def test_full_graph_on_rclpy_reproduces_the_lockstep_outcome_and_is_what_ros2_sh
 
     # parameters through rcl_interfaces: what the launcher gave each node
     given = node_overrides("full", "combined", {"scenario": SCENARIO, "vehicle.mu": load_scenario(SCENARIO).mu},
-                           rate=RATE)
+                           rate=1.0)
     params = report["parameters"]
     assert params["observer"]["values"] == {"use_sim_time": True, "scenario": SCENARIO,
                                             "simulation.planner": "combined",
                                             "vehicle.mu": given["observer"]["vehicle.mu"]}
     assert params["vehicle_simulator"]["values"] == {
-        "use_sim_time": False, "scenario": SCENARIO, "seed": 0, "rate": RATE, "vehicle_bus": "topics",
+        "use_sim_time": False, "scenario": SCENARIO, "seed": 0, "rate": 1.0, "vehicle_bus": "topics",
         "wait_for": given["vehicle_simulator"]["wait_for"]}
     assert params["motion_controller"]["values"] == {"use_sim_time": True, "simulation.planner": "combined"}
     assert {"use_sim_time", "scenario", "vehicle.mu", "simulation.planner"} <= set(params["observer"]["names"])
@@ -266,13 +257,13 @@ def test_mixed_graph_simulator_and_observer_on_rclpy_the_rest_on_cyclone(
                 "msf_planner": "dds", "weight_fbl": "dds", "motion_controller": "dds"}
     env = {**dds_env, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}  # the launcher: .venv's interpreter, no rclpy
     env.pop("MOOSE_RUNTIME")
-    result = run([sys.executable, "-c", MIXED, SCENARIO, json.dumps(runtimes), str(tmp_path / "bag"), str(RATE)], env,
-                 LIMIT)
+    result = run([sys.executable, "-c", MIXED, EXTREME, json.dumps(runtimes), str(tmp_path / "bag")], env, LIMIT)
     assert result.returncode == 0, result.stderr[-3000:]
     log, summary = result.stdout.rsplit("\n", 2)[0], json.loads(result.stdout.strip().splitlines()[-1])
     assert summary["runtime"] == {**runtimes, "moose_monitor": "dds"}
-    check_outcome(summary, lockstep())
-    # the Cyclone nodes' start-up diagnostics reached the rclpy simulator, which then started the clock
+    assert not summary["degraded"] and summary["odom_samples"] == 901, summary["incidents"]
+    assert_reproduces(summary, reference(load_scenario(EXTREME)))
+    # the Cyclone nodes' start-up diagnostics reached the rclpy simulator, which then started simulated time
     assert "starting without" not in log
     for name in runtimes:
         assert f"{name} started" in log
