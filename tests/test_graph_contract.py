@@ -16,6 +16,7 @@ import pytest
 from moose.canbus.bus import DEFAULT_GROUP
 from moose.canbus.ecu import VehicleEcu
 from moose.canbus.safety import GuardParams
+from moose.params import ParamError
 from moose.planner import MODE_PLANNERS
 from moose.scenario import load_scenario
 from moose_ros.graph import COMMAND_TIMEOUT, GRAPHS, GROUPS, NODES, TOPICS, publishes, subscribes, topic_table
@@ -132,6 +133,14 @@ def test_ros2_launch_file_starts_what_moose_launch_starts(with_simulator: bool, 
     params_file = str(ROOT / "config" / "moose.yaml")
     with_file = graph_launch.node_parameters("all", with_simulator, scenario, planner, params_file)
     assert all(p[0] == params_file and p[1] == started["all"][n][0] for n, p in with_file.items())
+    if with_simulator:  # lockstep:=true gives what moose launch --lockstep gives
+        lockstep = graph_launch.node_parameters("all", True, scenario, planner, lockstep=True)
+        assert lockstep == {n: [v] for n, v in node_overrides(graph, planner, {"scenario": scenario, "vehicle.mu": mu},
+                                                               lockstep=True).items()}
+        assert all(v[0]["lockstep_nodes"] == expected and v[0]["use_sim_time"] is False for v in lockstep.values())
+    else:
+        with pytest.raises(ParamError, match="--lockstep needs the vehicle simulator"):
+            graph_launch.node_parameters("all", False, scenario, planner, lockstep=True)
 
 
 def test_ros2_launch_files_start_the_package_executables() -> None:

@@ -1,5 +1,6 @@
 """ROS 2 launch of the moose graph:
-`ros2 launch moose_ros moose_graph.launch.py [group:=all|perception|planning|control|vehicle|bridge]`.
+`ros2 launch moose_ros moose_graph.launch.py [group:=all|perception|planning|control|vehicle|bridge]
+[lockstep:=true]`.
 
 Groups mirror the vehicle's ECUs (moose_ros.graph.GROUPS): perception (observer, obstacle
 detector), planning (MPC, MSF, weight function + FBL; the MicroLabBox), control (motion
@@ -9,7 +10,8 @@ gets are ``moose launch``'s (:func:`moose_ros.launch.node_overrides` of the grap
 ``car`` without the simulator; :func:`node_parameters` here, checked by tests/test_graph_contract.py):
 only the parameters a node takes, simulated time where the simulator publishes /clock, the
 scenario's road friction for every node, and the simulator waits for every other node of the
-graph (whichever group launches them) before it starts the clock.
+graph (whichever group launches them) before it starts the clock.  ``lockstep:=true`` runs the graph in lockstep
+(``moose launch --lockstep``, :mod:`moose_ros.lockstep`; with the simulator only).
 """
 import typing
 
@@ -19,7 +21,7 @@ from moose_ros.graph import GROUPS
 
 
 def node_parameters(group: str, with_simulator: bool, scenario: str, planner: str,
-                    params_file: str = "") -> dict[str, list]:
+                    params_file: str = "", lockstep: bool = False) -> dict[str, list]:
     """``{node: parameters}`` of the nodes this launch starts: the parameter file (if any), then the
     overrides ``moose launch`` gives the node (which win)."""
     from moose.scenario import load_scenario
@@ -27,7 +29,8 @@ def node_parameters(group: str, with_simulator: bool, scenario: str, planner: st
 
     mu = load_scenario(scenario).mu
     given = {"scenario": scenario, **({"vehicle.mu": mu} if mu is not None else {})}  # as moose launch
-    overrides = node_overrides("full" if with_simulator else "car", planner, given, params_file or None)
+    overrides = node_overrides("full" if with_simulator else "car", planner, given, params_file or None,
+                               lockstep=lockstep)
     return {name: ([params_file] if params_file else []) + [values] for name, values in overrides.items()
             if group == "all" or name in GROUPS[group]}
 
@@ -37,9 +40,9 @@ def nodes(context, *args, **kwargs):
     from launch_ros.actions import Node
 
     value = {key: LaunchConfiguration(key).perform(context)
-             for key in ("group", "with_simulator", "scenario", "planner", "params_file")}
+             for key in ("group", "with_simulator", "scenario", "planner", "params_file", "lockstep")}
     chosen = node_parameters(value["group"], value["with_simulator"] == "true", value["scenario"], value["planner"],
-                             value["params_file"])
+                             value["params_file"], value["lockstep"] == "true")
     return [Node(package="moose_ros", executable=name, name=name, output="screen", parameters=parameters)
             for name, parameters in chosen.items()]
 
@@ -54,5 +57,6 @@ def generate_launch_description():
         DeclareLaunchArgument("scenario", default_value=DEFAULT_SCENARIO),
         DeclareLaunchArgument("planner", default_value="combined", choices=list(typing.get_args(PlannerMode))),
         DeclareLaunchArgument("params_file", default_value=""),
+        DeclareLaunchArgument("lockstep", default_value="false", choices=["true", "false"]),
         OpaqueFunction(function=nodes),
     ])
