@@ -1,5 +1,9 @@
 """Files of the commands: input files read the one way every command reads them, and outputs that fail.
 
+A YAML input (a parameter file, a scenario) is parsed by :func:`load_yaml`: PyYAML's safe loader, except that
+a key given twice in one mapping is an error naming it; plain YAML keeps the last and drops the first without
+a word, so a repeated ``/**:`` section or a repeated ``m:`` would silently lose what it set.
+
 A path on the command line can name anything: a FIFO (reading it waits for a writer that never comes), a
 device (``/dev/zero`` never ends), a directory, a file of gigabytes or of bytes that are not text.
 :func:`read_input` reads only a regular file of at most :data:`MAX_INPUT_BYTES`, as UTF-8; anything else is a
@@ -15,7 +19,9 @@ import contextlib
 import os
 import stat
 from pathlib import Path
-from typing import Iterator
+from typing import Any, Iterator
+
+import yaml
 
 from .errors import ParamError
 
@@ -79,3 +85,41 @@ def replaced_atomically(path: Path) -> Iterator[Path]:
         with contextlib.suppress(OSError):
             tmp.unlink()
         raise
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, refusing a key given twice in one mapping (a merge key ``<<`` may still be
+    overridden: that is what it is for)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
+        seen: dict[Any, int] = {}
+        for key_node, _ in node.value:
+            if key_node.tag == "tag:yaml.org,2002:merge":
+                continue
+            key = self.construct_object(key_node, deep=True)
+            line = key_node.start_mark.line + 1
+            try:
+                if key in seen:
+                    raise _DuplicateKey(key, seen[key], line)
+            except TypeError:  # an unhashable key: the safe loader reports it below
+                break
+            seen[key] = line
+        return super().construct_mapping(node, deep=deep)
+
+
+class _DuplicateKey(yaml.YAMLError):
+    def __init__(self, key: Any, first: int, again: int) -> None:
+        super().__init__(f"{key!r} is given twice in one mapping (lines {first} and {again}); "
+                         "YAML would keep the second and drop the first without a word")
+
+
+def load_yaml(text: str, where: str) -> Any:
+    """The YAML document ``text`` (read by :func:`read_input`), parsed safely; ``where`` names it in errors
+    ("parameter file 'p.yaml'").  Invalid YAML and a key given twice in one mapping are a
+    :class:`~moose.params.ParamError` naming ``where``."""
+    try:
+        return yaml.load(text, Loader=_UniqueKeyLoader)
+    except _DuplicateKey as exc:
+        raise ParamError(f"{where}: {exc}") from None
+    except yaml.YAMLError as exc:
+        raise ParamError(f"{where} is not valid YAML: {exc}") from None

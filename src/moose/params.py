@@ -17,8 +17,6 @@ import typing
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Mapping, TypeVar
 
-import yaml
-
 from .errors import ParamError
 
 if TYPE_CHECKING:
@@ -299,14 +297,10 @@ def read_ros_params(path: str | Path, node: str | None = None, *, reader: str | 
     only the wildcard section (``moose simulate``): any other section of the file is then a
     :class:`ParamError` naming it, instead of being ignored.
     """
-    from .files import read_input
+    from .files import load_yaml, read_input
 
     path = Path(path)
-    text = read_input(path, "parameter file")
-    try:
-        document = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ParamError(f"parameter file {str(path)!r} is not valid YAML: {exc}") from None
+    document = load_yaml(read_input(path, "parameter file"), f"parameter file {str(path)!r}")
     if not isinstance(document, Mapping):
         raise ParamError(f"parameter file {str(path)!r}: expected a mapping of node names, got {document!r}")
     if reader is not None:

@@ -16,9 +16,7 @@ import dataclasses
 from pathlib import Path
 from typing import Any, Optional
 
-import yaml
-
-from ..files import read_input
+from ..files import load_yaml, read_input
 from ..paper import PAPER_FRICTION
 from ..params import ParamError, build, check, non_negative, positive, replace
 from ..resources import SCENARIO_DIR
@@ -143,11 +141,7 @@ def load_scenario(name_or_path: str | Path, directory: Path = SCENARIO_DIR) -> S
     if not path.is_file():
         known = ", ".join(available_scenarios(directory))
         raise ParamError(f"scenario = {str(name_or_path)!r} is unknown: no file {str(path)!r} (shipped: {known})")
-    text = read_input(path, "scenario file")
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ParamError(f"scenario file {str(path)!r} is not valid YAML: {exc}") from None
+    data = load_yaml(read_input(path, "scenario file"), f"scenario file {str(path)!r}")
     return scenario_from_mapping(data, where=path.stem)
 
 

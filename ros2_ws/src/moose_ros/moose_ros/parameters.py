@@ -198,15 +198,10 @@ def check_parameter_file(path: str | Path, nodes: Collection[str] = tuple(NODES)
     every node of any graph; ``graph``: the name of the graph they make, for the message) — a misspelt node name,
     a wildcard such as ``/*``, or a node the graph does not run would otherwise be ignored, its values never
     checked."""
-    import yaml
+    from moose.files import load_yaml, read_input
 
-    from moose.files import read_input
-
-    text = read_input(path, "parameter file")  # a FIFO, a device, bytes that are not text: an error here
-    try:
-        document = yaml.safe_load(text)
-    except yaml.YAMLError:
-        return  # moose.params.read_ros_params reports it with the path
+    # a FIFO, a device, bytes that are not text, invalid YAML, a section or key given twice: an error here
+    document = load_yaml(read_input(path, "parameter file"), f"parameter file {str(path)!r}")
     if not isinstance(document, Mapping):
         return
     for section in document:

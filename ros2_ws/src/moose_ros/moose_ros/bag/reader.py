@@ -72,6 +72,8 @@ class ReadReport:
     """Files whose recording was not closed, each with how it ends."""
     stopped: str = ""
     """Why reading ended before the end of the bag (``""``: it did not)."""
+    metadata: str = ""
+    """Why the bag's ``metadata.yaml`` could not be read (``""``: it could, or the bag has none)."""
 
     def skip(self, topic: str, type_name: str, reason: str) -> None:
         entry = self.skipped.setdefault(topic, {"type": type_name, "count": 0, "reason": reason})
@@ -80,7 +82,8 @@ class ReadReport:
     @property
     def complete(self) -> bool:
         """Whether every message of the bag was delivered, from a recording that was closed."""
-        return not (self.skipped or self.missing or self.lost_bytes or self.damaged or self.unfinished or self.stopped)
+        return not (self.skipped or self.missing or self.lost_bytes or self.damaged or self.unfinished or self.stopped
+                    or self.metadata)
 
     def losses(self) -> list[str]:
         """One line per loss (empty when :attr:`complete`)."""
@@ -93,7 +96,8 @@ class ReadReport:
         if self.lost_bytes:
             lines.append(f"bag {self.path!r}: {self.lost_bytes} byte(s) of records are unreadable (a truncated or "
                          "corrupt file); their messages are lost")
-        lines += [f"bag {self.path!r}: {line}" for line in self.damaged + self.unfinished + [self.stopped] if line]
+        notes = [self.metadata, *self.damaged, *self.unfinished, self.stopped]
+        lines += [f"bag {self.path!r}: {line}" for line in notes if line]
         return lines
 
 
@@ -412,15 +416,20 @@ def _ending(file: Path) -> str:
     return "closed" if struct.unpack_from("<Q", tail, 9)[0] else "checkpoint"
 
 
-def _listed_counts(path: Path) -> dict[str, int]:
-    """Messages per topic that a readable ``metadata.yaml`` lists (empty without one)."""
+def _listed_counts(path: Path) -> tuple[dict[str, int], str]:
+    """Messages per topic that ``metadata.yaml`` lists (empty without one), and why it could not be read (``""``:
+    it could, or there is none — a bag of one ``.mcap`` file, a recording not closed)."""
     import yaml
 
+    meta = path / "metadata.yaml"
+    if not meta.is_file():
+        return {}, ""
     try:
-        info = yaml.safe_load((path / "metadata.yaml").read_text(encoding="utf-8"))["rosbag2_bagfile_information"]
-        return {e["topic_metadata"]["name"]: int(e["message_count"]) for e in info["topics_with_message_count"]}
-    except Exception:  # noqa: BLE001 - no file, not YAML, another layout: nothing listed
-        return {}
+        info = yaml.safe_load(meta.read_text(encoding="utf-8"))["rosbag2_bagfile_information"]
+        return {e["topic_metadata"]["name"]: int(e["message_count"]) for e in info["topics_with_message_count"]}, ""
+    except Exception as exc:  # noqa: BLE001 - not UTF-8, not YAML, another layout: nothing listed, and said so
+        return {}, (f"metadata.yaml is unreadable ({type(exc).__name__}): the messages were read from the MCAP files "
+                    "alone, and rosbag2 or rosbags will refuse this bag until it is rewritten")
 
 
 class _IndexFailed(Exception):
@@ -473,7 +482,7 @@ class BagReader:
         for s in self._streams:
             for topic, schema in s.channels.values():
                 self.topics.setdefault(topic, s.schemas.get(schema, ("", "", ""))[0])
-        listed = _listed_counts(self.path)
+        listed, self.report.metadata = _listed_counts(self.path)
         self.counts = {t: listed.get(t) for t in set(self.topics) | set(listed)}
         self._unfinished({f: s.ending for f, s in zip(files, self._streams)})
         self._damage(files, self._streams)
