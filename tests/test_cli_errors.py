@@ -12,6 +12,7 @@ import os
 import re
 import signal
 import socket
+import struct
 import subprocess
 import sys
 import threading
@@ -334,7 +335,11 @@ class _Service:
 
 
 @pytest.mark.parametrize("banner, words", [(b"SSH-2.0-OpenSSH_9.6\r\n", "is not a Dask scheduler (it opened with"),
-                                           (b"", "no Dask scheduler answers")])
+                                           (b"", "no Dask scheduler answers"),
+                                           # a small length, then garbage (the probe's rerun: a correct error, then
+                                           # a traceback from the half-made Client and a 20 s wait)
+                                           (struct.pack("Q", 16) + bytes(range(7, 23)),
+                                            "is not a Dask scheduler (its first message, 16 of 16 bytes")])
 def test_a_service_that_is_not_dask_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str], banner: bytes,
                                                words: str) -> None:
     """The probe: an SSH server on --address made distributed allocate 3 EiB (ArrayMemoryError) and print two
@@ -422,3 +427,34 @@ def test_the_can_bridge_refuses_to_start_without_its_bus() -> None:
             CanBridge(node)
     finally:
         node.shutdown()
+
+
+def test_figures_and_maps_on_a_full_or_read_only_disk_are_errors(
+        tmp_path: Path, tiny_disk: Callable[[int], Path], capsys: pytest.CaptureFixture[str]) -> None:
+    """The probe's rerun: ``bag view -o`` on a full disk, ``sweep plot`` on a read-only folder and on a truncated
+    results file each ended in a traceback.  Now: exit 5 naming the figure (nothing half written), and exit 2
+    naming the folder or the file."""
+    from moose.verdict import EXIT_BAD_INPUT, EXIT_OUTPUT
+
+    full = tiny_disk(16)
+    (full / "filler").write_bytes(bytes(15 * 1024))
+    figure = full / "view.png"
+    done = here(capsys, "bag", "view", str(Path(__file__).resolve().parents[1] / "bags" / "paper_v5_tau3_combined"),
+                "-o", str(figure))
+    assert done.returncode == EXIT_OUTPUT and "Traceback" not in done.stderr
+    assert f"moose: error: -o {str(figure)!r}: writing failed (No space left on device)" in done.stderr
+    assert sorted(p.name for p in full.iterdir()) == ["filler"]  # no half-written PNG, no temporary file
+    sweep = tmp_path / "sweep"
+    assert here(capsys, "sweep", "--speed", "5", "--tau", "2", "--nu", "0.5", "--duration", "1", "--workers", "1",
+                "--quiet", "-o", str(sweep)).returncode == 0
+    blocked = tmp_path / "blocked"  # a folder that cannot be made (root writes read-only modes: a file is in the way)
+    blocked.write_text("a file where the folder would go")
+    done = here(capsys, "sweep", "plot", str(sweep), "--plot-output", str(blocked / "maps"))
+    assert done.returncode == EXIT_BAD_INPUT and "Traceback" not in done.stderr
+    assert f"moose: error: --plot-output {str(blocked / 'maps')!r} cannot be created" in done.stderr
+    results = sweep / "results.parquet"
+    results.write_bytes(results.read_bytes()[:100])
+    done = here(capsys, "sweep", "plot", str(sweep))
+    assert done.returncode == EXIT_BAD_INPUT and "Traceback" not in done.stderr
+    assert f"moose: error: sweep results {str(results)!r} are unreadable" in done.stderr
+    assert "--resume" in done.stderr  # and how to rebuild them

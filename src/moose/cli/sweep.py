@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from ..files import OutputError
 from ..params import ParamError
 from .common import add_timing_argument, positive_float, with_timing
 
@@ -187,8 +188,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     print(f"outcomes        {counts}")
     print(f"results         {output / 'results.parquet'}  ({len(rows)} of {len(cases)} cases)")
     if report.interrupted:
-        print(f"moose: interrupted: {len(cases) - len(rows)} cases left; rerun with --resume -o {output}",
-              file=sys.stderr)
+        print(f"moose: interrupted: {len(cases) - len(rows)} cases left; rerun the same command with --resume "
+              f"(-o {output})", file=sys.stderr)
         return 130
     print(f"maps            moose sweep plot {output}")
     if failed:
@@ -205,6 +206,15 @@ def cmd_plot(args: argparse.Namespace) -> int:
         raise ParamError("moose sweep plot needs the sweep's folder: moose sweep plot DIR")
     folder = Path(args.folder)
     out = Path(args.plot_output) if args.plot_output else folder / "maps"
-    report = draw_maps(folder, out, x=args.x, y=args.y)
+    flag = "--plot-output" if args.plot_output else "the maps folder"
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ParamError(f"{flag} {str(out)!r} cannot be created: {exc.strerror or exc}") from None
+    try:
+        report = draw_maps(folder, out, x=args.x, y=args.y)
+    except OSError as exc:  # a full disk, a folder made read-only meanwhile: what was drawn stays
+        raise OutputError(f"{flag} {str(out)!r}: writing failed ({exc.strerror or exc}); the maps drawn before "
+                          "it are there") from None
     print(f"report          {report}")
     return 0

@@ -192,24 +192,56 @@ def speaks_dask(address: str, timeout: float) -> None:
         raise ParamError(f"--address {address!r} is invalid: {exc}") from None
     if scheme != "tcp":
         return
+    def receive(sock: socket.socket, size: int) -> bytes:
+        data = b""
+        while len(data) < size:
+            more = sock.recv(size - len(data))
+            if not more:
+                break
+            data += more
+        return data
+
     try:
         with socket.create_connection((host, port), timeout=timeout) as sock:
-            head = b""
-            while len(head) < 8:
-                data = sock.recv(8 - len(head))
-                if not data:
-                    break
-                head += data
+            head = receive(sock, 8)
+            length = struct.unpack("Q", head)[0] if len(head) == 8 else 0
+            message = receive(sock, length) if 0 < length <= HANDSHAKE_LIMIT else b""
     except OSError as exc:  # refused, unreachable, timed out: nothing answers
         raise ParamError(f"--address {address!r}: no Dask scheduler answers ({type(exc).__name__}: "
                          f"{exc.strerror or exc})") from None
     if len(head) < 8:
         raise ParamError(f"--address {address!r}: no Dask scheduler answers (the service closed the connection "
                          f"after {len(head)} bytes)")
-    (length,) = struct.unpack("Q", head)
     if not 0 < length <= HANDSHAKE_LIMIT:
         raise ParamError(f"--address {address!r}: the service there is not a Dask scheduler (it opened with "
                          f"{head!r})")
+    if not _is_handshake(message, length):
+        raise ParamError(f"--address {address!r}: the service there is not a Dask scheduler (its first message, "
+                         f"{len(message)} of {length} bytes, is not Dask's handshake)")
+
+
+def _is_handshake(message: bytes, length: int) -> bool:
+    """Whether ``message`` is the first message a Dask scheduler sends: ``distributed.comm.tcp``'s frames (an
+    8-byte count, an 8-byte length per frame, the frames) whose first frame is the msgpack mapping of its
+    handshake, with the scheduler's ``python`` version."""
+    import struct
+
+    import msgpack
+
+    if len(message) != length or length < 16:
+        return False
+    (count,) = struct.unpack_from("Q", message)
+    if not 0 < count <= 64 or length < 8 * (1 + count):
+        return False
+    sizes = struct.unpack_from(f"{count}Q", message, 8)
+    start = 8 * (1 + count)
+    if start + sum(sizes) != length:
+        return False
+    try:
+        info = msgpack.unpackb(message[start:start + sizes[0]], raw=False)
+    except Exception:  # noqa: BLE001 - whatever a stranger sends: not a handshake
+        return False
+    return isinstance(info, dict) and "python" in info
 
 
 class DaskBackend:

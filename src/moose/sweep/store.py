@@ -186,7 +186,7 @@ class RunFolder:
         except OSError as exc:
             raise OutputError(f"-o {str(self.path)!r}: case {row.get('case_id')} cannot be recorded "
                               f"({exc.strerror or exc}); the cases recorded before it are kept in {JOURNAL}: "
-                              f"make room, then continue with --resume -o {str(self.path)!r}") from None
+                              f"make room, then run the same moose sweep command again with --resume") from None
 
     def close(self) -> None:
         """Close the journal; what a failed write left unwritten is not recorded (its case runs again)."""
@@ -237,4 +237,11 @@ def read_results(path: Path) -> Any:
         if path.is_dir() and (path / JOURNAL).exists():
             return pq.read_table(RunFolder(path).write_results())
         raise ParamError(f"{str(path)!r} holds no sweep results ({RESULTS})")
-    return pq.read_table(target)
+    import pyarrow as pa
+
+    try:
+        return pq.read_table(target)
+    except (pa.ArrowException, OSError) as exc:
+        rebuild = (" (moose sweep --resume -o DIR with the sweep's flags rebuilds it from its cases.jsonl)"
+                   if path.is_dir() and (path / JOURNAL).exists() else "")
+        raise ParamError(f"sweep results {str(target)!r} are unreadable: {exc}{rebuild}") from None

@@ -13,9 +13,9 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
-from moose.cli.common import check_output_file, plot_suffixes, positive_float, run_folder
+from moose.cli.common import check_output_file, plot_suffixes, positive_float, run_folder, write_output
 from moose.files import OutputError
 from moose.params import ParamError
 from moose.schema import PLANNER_MODES
@@ -100,11 +100,11 @@ def cmd_bag(args: argparse.Namespace) -> int:
                       f"{r['recorded_mpc_status'] or '-'} / {r['mpc_status'] or '-'}")
             print(json.dumps(summary, indent=2, allow_nan=False))
             if plot is not None:
-                print(f"figure {bag.plot_replan(result['rows'], plot)}")
+                _write_figure("--plot", plot, lambda tmp: bag.plot_replan(result["rows"], tmp))
         elif args.bag_command == "view":
             out = check_output_file("-o", args.output, plot_suffixes())
             assert out is not None  # -o is required
-            print(f"figure {bag.plot_birdseye(args.path, out, report=report)}")
+            _write_figure("-o", out, lambda tmp: bag.plot_birdseye(args.path, tmp, report=report))
         elif args.bag_command == "record":
             return _record(bag, args)
         elif args.bag_command == "play":
@@ -122,6 +122,15 @@ def cmd_bag(args: argparse.Namespace) -> int:
     for line in report.losses():
         print(f"moose: warning: {line}", file=sys.stderr)
     return EXIT_CLEAR if report.complete else EXIT_FAILED
+
+
+def _write_figure(flag: str, path: Path, draw: Callable[[Path], Any]) -> None:
+    """Draw the figure ``path`` of a reading command, whole or not at all; a full disk is an
+    :class:`~moose.files.OutputError` (exit status 5) after what was printed."""
+    failure = write_output(flag, path, draw)
+    if failure is not None:
+        raise OutputError(failure)
+    print(f"figure {path}")
 
 
 def _record(bag: Any, args: argparse.Namespace) -> int:
