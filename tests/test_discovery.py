@@ -187,8 +187,8 @@ def test_fast_dds_gets_the_loopback_profile_and_the_range_in_it() -> None:
     """rmw_fastrtps' LOCALHOST adds a UDP transport on every interface to any profile's: an rclpy node on Fast DDS
     asks it for SYSTEM_DEFAULT, and the profile (loopback UDP, 127.0.0.1 as the peer, no multicast) is the range."""
     env = Discovery.from_environ({}).rclpy_environment()
-    assert env == {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SYSTEM_DEFAULT", "SKIP_DEFAULT_XML_FILE": "1",
-                   "FASTRTPS_DEFAULT_PROFILES_FILE": str(FASTDDS_PROFILE),
+    assert env == {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SYSTEM_DEFAULT", "ROS_LOCALHOST_ONLY": "0",
+                   "SKIP_DEFAULT_XML_FILE": "1", "FASTRTPS_DEFAULT_PROFILES_FILE": str(FASTDDS_PROFILE),
                    "FASTDDS_DEFAULT_PROFILES_FILE": str(FASTDDS_PROFILE)}
     ns = {"f": "http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles"}
     profile = ET.parse(FASTDDS_PROFILE).getroot()
@@ -216,7 +216,11 @@ def test_the_log_line_says_how_each_runtime_holds_the_range() -> None:
     assert mine.describe("rmw_fastrtps_cpp") == (here + "then the Fast DDS profiles of /etc/mine.xml (not bound to "
                                                  "loopback by moose)")
     peers = Discovery.from_environ({"ROS_STATIC_PEERS": "10.0.0.7"})
-    assert peers.describe("rmw_fastrtps_cpp") == here + "static peers 10.0.0.7"
+    # the probe: "this host only" while a host not named reached the bridge; static peers open the graph
+    for rmw in ("rmw_fastrtps_cpp", None):
+        assert peers.describe(rmw) == ("LOCALHOST: this host and the static peers, static peers 10.0.0.7 (not "
+                                       "confined: bound to every interface, the graph can be reached by any host "
+                                       "that knows its address)")
 
 
 def test_udp_bindings_reads_this_process_sockets() -> None:
@@ -246,3 +250,20 @@ def test_an_rclpy_node_refuses_to_run_when_fast_dds_did_not_apply_the_profile(ro
                          timeout=120, env={**env, "MOOSE_RUNTIME": "rclpy"})
     assert f"Fast DDS did not apply {loose}: UDP sockets bound to 0.0.0.0:" in out.stdout, out.stdout + out.stderr
     assert "refusing to run a node that the network can reach" in out.stdout
+
+
+def test_ros_localhost_only_keeps_an_rclpy_node_on_loopback(ros_env: dict[str, str]) -> None:
+    """The probe's rerun: with the deprecated ``ROS_LOCALHOST_ONLY=1`` rmw_fastrtps set up transports of its own on
+    every interface beside the profile's, and every rclpy node refused to start.  The switch means LOCALHOST, so
+    the profile holds it: the node runs, bound to loopback only."""
+    script = ("from moose_ros.runtime import create_node\nfrom moose_ros.runtime.discovery import udp_bindings\n"
+              "node = create_node('localhost_only')\n"
+              "print(sorted({a for a, _ in (udp_bindings() or {}).values()}))\nprint(node.describe_discovery())\n"
+              "node.shutdown()\n")
+    env = {k: v for k, v in ros_env.items() if k not in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "CYCLONEDDS_URI")}
+    out = subprocess.run([env["MOOSE_ROS_PYTHON"], "-c", script], capture_output=True, text=True, timeout=120,
+                         env={**env, "MOOSE_RUNTIME": "rclpy", "ROS_LOCALHOST_ONLY": "1"})
+    assert out.returncode == 0, out.stdout + out.stderr
+    addresses, line = out.stdout.splitlines()[-2:]
+    assert addresses == "['127.0.0.1']", out.stdout
+    assert line.startswith("LOCALHOST: this host only, Fast DDS bound to loopback"), line

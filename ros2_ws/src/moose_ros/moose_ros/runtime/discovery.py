@@ -188,14 +188,18 @@ class Discovery:
         directory (``SKIP_DEFAULT_XML_FILE``); otherwise :meth:`ros_environment`."""
         if self.rmw not in FASTDDS_RMWS or not self.fastdds_loopback:
             return self.ros_environment()
-        return {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SYSTEM_DEFAULT", "SKIP_DEFAULT_XML_FILE": "1",
-                **dict.fromkeys(FASTDDS_PROFILE_VARIABLES, str(FASTDDS_PROFILE))}
+        # ROS_LOCALHOST_ONLY=1 (read above as LOCALHOST) would make rmw_fastrtps set up transports of its own over
+        # the profile's loopback binding: the profile holds it instead
+        return {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SYSTEM_DEFAULT", "ROS_LOCALHOST_ONLY": "0",
+                "SKIP_DEFAULT_XML_FILE": "1", **dict.fromkeys(FASTDDS_PROFILE_VARIABLES, str(FASTDDS_PROFILE))}
 
     def describe(self, rmw: Optional[str] = None) -> str:
         """One line for the log: the range, where it reaches, and how it is held: on the Cyclone DDS backend
         (``rmw`` ``None``) or on an rclpy node's RMW implementation ``rmw``."""
         reach = {"LOCALHOST": "this host only", "SUBNET": "the local network (multicast)",
                  "SYSTEM_DEFAULT": "the middleware's defaults", "OFF": "this process only"}[self.range]
+        if self.static_peers:
+            reach = "this host and the static peers"
         text = f"{self.range}: {reach}"
         if rmw in FASTDDS_RMWS:
             if self.fastdds_loopback:
@@ -212,7 +216,8 @@ class Discovery:
         elif self.range == "LOCALHOST":
             text += f", ROS 2's own on {rmw} (not bound to loopback by moose)"
         if self.static_peers:
-            text += f", static peers {', '.join(self.static_peers)}"
+            text += (f", static peers {', '.join(self.static_peers)} (not confined: bound to every interface, the "
+                     "graph can be reached by any host that knows its address)")
         if self.ignored_peers:
             text += f" (static peers {', '.join(self.ignored_peers)} ignored)"
         return text
