@@ -72,6 +72,9 @@ def test_deprecated_localhost_only_prevails_and_drops_the_peers() -> None:
     ({"ROS_AUTOMATIC_DISCOVERY_RANGE": "ALL"}, "expected one of LOCALHOST, SUBNET, SYSTEM_DEFAULT, OFF"),
     ({"ROS_STATIC_PEERS": '10.0.0.7"/><Peer address="evil'}, "ROS_STATIC_PEERS: .* is invalid"),
     ({"ROS_LOCALHOST_ONLY": "yes"}, "ROS_LOCALHOST_ONLY = 'yes' is invalid"),
+    # the probe's rerun: a profiles file that does not exist left Fast DDS on its defaults, the bridge reachable
+    ({"FASTRTPS_DEFAULT_PROFILES_FILE": "/nonexistent.xml"}, "FASTRTPS_DEFAULT_PROFILES_FILE = '/nonexistent.xml' "
+                                                             "names no file"),
 ])
 def test_bad_values_are_refused_with_the_variable_named(env: dict, match: str) -> None:
     with pytest.raises(ParamError, match=match):
@@ -183,7 +186,7 @@ def test_the_generated_configuration_is_accepted_by_cyclone_dds() -> None:
     assert out.stdout.strip() == "ok", out.stderr
 
 
-def test_fast_dds_gets_the_loopback_profile_and_the_range_in_it() -> None:
+def test_fast_dds_gets_the_loopback_profile_and_the_range_in_it(tmp_path: Path) -> None:
     """rmw_fastrtps' LOCALHOST adds a UDP transport on every interface to any profile's: an rclpy node on Fast DDS
     asks it for SYSTEM_DEFAULT, and the profile (loopback UDP, 127.0.0.1 as the peer, no multicast) is the range."""
     env = Discovery.from_environ({}).rclpy_environment()
@@ -199,22 +202,29 @@ def test_fast_dds_gets_the_loopback_profile_and_the_range_in_it() -> None:
     assert profile.find(".//f:participant", ns).get("is_default_profile") == "true"
     # the opt-ins, a profile of the user's and other RMWs keep ROS 2's own settings
     for environ in ({"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}, {"ROS_STATIC_PEERS": "10.0.0.7"},
-                    {"FASTRTPS_DEFAULT_PROFILES_FILE": "/etc/mine.xml"}, {"RMW_IMPLEMENTATION": "rmw_cyclonedds_cpp"},
-                    {"RMW_IMPLEMENTATION": "rmw_zenoh_cpp"}):
+                    {"FASTRTPS_DEFAULT_PROFILES_FILE": str(mine(tmp_path))},
+                    {"RMW_IMPLEMENTATION": "rmw_cyclonedds_cpp"}, {"RMW_IMPLEMENTATION": "rmw_zenoh_cpp"}):
         d = Discovery.from_environ(environ)
         assert d.rclpy_environment() == d.ros_environment(), environ
 
 
-def test_the_log_line_says_how_each_runtime_holds_the_range() -> None:
+def mine(folder: Path) -> Path:
+    """A Fast DDS profiles file of the user's."""
+    path = folder / "mine.xml"
+    path.write_text('<dds xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles"/>')
+    return path
+
+
+def test_the_log_line_says_how_each_runtime_holds_the_range(tmp_path: Path) -> None:
     here = "LOCALHOST: this host only, "
     d = Discovery.from_environ({})
     assert d.describe() == here + "Cyclone DDS on the loopback interface"
     assert d.describe("rmw_fastrtps_cpp") == here + "Fast DDS bound to loopback (fastdds_loopback.xml)"
     assert d.describe("rmw_cyclonedds_cpp") == d.describe()
     assert d.describe("rmw_zenoh_cpp") == here + "ROS 2's own on rmw_zenoh_cpp (not bound to loopback by moose)"
-    mine = Discovery.from_environ({"FASTRTPS_DEFAULT_PROFILES_FILE": "/etc/mine.xml"})
-    assert mine.describe("rmw_fastrtps_cpp") == (here + "then the Fast DDS profiles of /etc/mine.xml (not bound to "
-                                                 "loopback by moose)")
+    users = Discovery.from_environ({"FASTRTPS_DEFAULT_PROFILES_FILE": str(mine(tmp_path))})
+    assert users.describe("rmw_fastrtps_cpp") == (here + f"then the Fast DDS profiles of {mine(tmp_path)} (not bound "
+                                                  "to loopback by moose)")
     peers = Discovery.from_environ({"ROS_STATIC_PEERS": "10.0.0.7"})
     # the probe: "this host only" while a host not named reached the bridge; static peers open the graph
     for rmw in ("rmw_fastrtps_cpp", None):

@@ -121,6 +121,10 @@ class Discovery:
         else:
             ignored = ()
         profiles = next((environ[v].strip() for v in FASTDDS_PROFILE_VARIABLES if environ.get(v, "").strip()), "")
+        if profiles and not Path(profiles).is_file():  # Fast DDS would run on its defaults, open to the network
+            name = next(v for v in FASTDDS_PROFILE_VARIABLES if environ.get(v, "").strip())
+            raise ParamError(f"{name} = {profiles!r} names no file: Fast DDS would ignore it and run on its defaults "
+                             "(every interface); unset it to stay on this host")
         return cls(chosen, peers, environ.get("CYCLONEDDS_URI", "").strip(), ignored, profiles,
                    environ.get("RMW_IMPLEMENTATION", "").strip() or DEFAULT_RMW)
 
