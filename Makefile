@@ -20,19 +20,31 @@ lint: $(STAMP)
 	$(BIN)/ruff check
 	$(BIN)/mypy
 
-# The test suite (README, CI), under coverage.py with every Python subprocess included (nodes, CLI runs): the
-# report of src/moose and moose_ros, and a floor of 90 % on src/moose.  Data in .coverage-data/.
-# A quick run without coverage: .venv/bin/python -m pytest.  Extra pytest arguments: make test PYTEST_ARGS='-k can'
+# The test suite (README, CI), under coverage.py with every Python subprocess included (nodes, CLI runs, the
+# xdist workers): the report of src/moose and moose_ros, and a floor of 90 % on src/moose.  Data in .coverage-data/.
+# Two phases: every test not marked `realtime` on TEST_JOBS cores (pytest-xdist, groups of tests that share a
+# costly fixture or a file stay in one worker: tests/conftest.py), then the `realtime` ones alone, one at a time
+# (judged against the wall clock, they need the cores to themselves).  Each phase writes a JUnit report to
+# runs/tests/ (python bench/test_durations.py tabulates where the time went).
+# A quick run without coverage: .venv/bin/python -m pytest [-n 2].  Extra pytest arguments of both phases:
+# make test PYTEST_ARGS='-k can' (a phase that selects no test is skipped; both selecting none is an error).
 COVERAGE_FLOOR ?= 90
+TEST_JOBS ?= 2
+COVERAGE := MOOSE_COVERAGE_DIR=$(CURDIR)/.coverage-data $(BIN)/python -m coverage
 test: $(STAMP)
-	rm -rf .coverage-data && mkdir -p .coverage-data
-	MOOSE_COVERAGE_DIR=$(CURDIR)/.coverage-data $(BIN)/python -m coverage run -m pytest $(PYTEST_ARGS)
-	MOOSE_COVERAGE_DIR=$(CURDIR)/.coverage-data $(BIN)/python -m coverage combine -q
-	MOOSE_COVERAGE_DIR=$(CURDIR)/.coverage-data $(BIN)/python -m coverage report --sort=cover
-	MOOSE_COVERAGE_DIR=$(CURDIR)/.coverage-data $(BIN)/python -m coverage report --include='src/moose/*' \
-		--format=total --fail-under=$(COVERAGE_FLOOR) > /dev/null \
+	rm -rf .coverage-data runs/tests && mkdir -p .coverage-data runs/tests
+	@a=0; b=0; \
+	$(COVERAGE) run -m pytest -n $(TEST_JOBS) --dist loadgroup -m 'not realtime' \
+		--junitxml=runs/tests/parallel.xml $(PYTEST_ARGS) || a=$$?; \
+	$(COVERAGE) run -m pytest -m realtime --junitxml=runs/tests/realtime.xml $(PYTEST_ARGS) || b=$$?; \
+	if [ $$a -eq 5 ] && [ $$b -eq 5 ]; then echo "make test: no test selected"; exit 5; fi; \
+	if [ $$a -eq 5 ]; then a=0; fi; if [ $$b -eq 5 ]; then b=0; fi; \
+	exit $$(( a ? a : b ))
+	$(COVERAGE) combine -q
+	$(COVERAGE) report --sort=cover
+	$(COVERAGE) report --include='src/moose/*' --format=total --fail-under=$(COVERAGE_FLOOR) > /dev/null \
 		|| { echo "coverage of src/moose below $(COVERAGE_FLOOR) %"; exit 1; }
-	@echo "line coverage of src/moose: $$(MOOSE_COVERAGE_DIR=$(CURDIR)/.coverage-data $(BIN)/python -m coverage report --include='src/moose/*' --format=total) % (floor $(COVERAGE_FLOOR) %)"
+	@echo "line coverage of src/moose: $$($(COVERAGE) report --include='src/moose/*' --format=total) % (floor $(COVERAGE_FLOOR) %)"
 
 # Mutation score of the safety- and verdict-critical modules (bench/mutation.py; about 12 min on 2 cores; not in CI).
 # One module: make mutation MODULES=canbus.codec.  The table in docs/design.md: bench/mutation.py --table --docs

@@ -3,6 +3,7 @@ outlives the run."""
 from __future__ import annotations
 
 import os
+import resource
 import subprocess
 import sys
 import uuid
@@ -64,6 +65,33 @@ def reaper() -> Iterator[None]:
     proc.wait(timeout=30)
 
 
+CPU_AT_SETUP = pytest.StashKey[tuple[float, float]]()
+
+
+def _cpu_seconds() -> tuple[float, float]:
+    """CPU seconds (user + system) of this process and of the child processes it waited for (and theirs)."""
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime, children.ru_utime + children.ru_stime
+
+
+@pytest.hookimpl(wrapper=True, tryfirst=True)
+def pytest_runtest_setup(item: pytest.Item) -> Iterator[None]:
+    item.stash[CPU_AT_SETUP] = _cpu_seconds()
+    return (yield)
+
+
+@pytest.hookimpl(wrapper=True, tryfirst=True)
+def pytest_runtest_teardown(item: pytest.Item) -> Iterator[None]:
+    """The CPU seconds a test took, setup to teardown, in the test process and in the child processes it waited
+    for (nodes, CLI runs, and their children), as properties of its report: ``--junitxml`` writes them and
+    bench/test_durations.py tabulates them (docs/design.md, "Testing")."""
+    result = yield
+    if CPU_AT_SETUP in item.stash:
+        (own0, children0), (own1, children1) = item.stash[CPU_AT_SETUP], _cpu_seconds()
+        item.user_properties += [("cpu_s", f"{own1 - own0:.3f}"), ("child_cpu_s", f"{children1 - children0:.3f}")]
+    return result
+
+
 @pytest.fixture(autouse=True)
 def realtime(request: pytest.FixtureRequest) -> Iterator[None]:
     """A test marked ``realtime`` holds the machine's real-time slot (tests/isolation.py) while it runs."""
@@ -96,3 +124,53 @@ def paper_runs() -> Any:
     from moose.reproduce import RunCache
 
     return RunCache(load_config())
+
+
+
+SHARED_FIXTURES = ("paper_runs",)
+"""Session fixtures too costly to make twice: in a parallel run (``make test``: ``pytest -n 2 --dist loadgroup``)
+every file whose tests use one runs in the same xdist worker, so the fixture is made once, as in a serial run."""
+
+
+def xdist_group(nodeid: str, shared: dict[str, str]) -> str:
+    """The group of a test for ``--dist loadgroup``: the group it names (``pytest.mark.xdist_group``, as xdist
+    appends it to the test's id), else the shared fixture its file uses (``shared``: file name → fixture), else its
+    file.  A file is one group: its module-scoped fixtures are made once, and its processes and temporary names
+    never meet their twins in another worker."""
+    if "@" in nodeid.rsplit("::", 1)[-1]:
+        return nodeid.rsplit("@", 1)[-1]
+    path = nodeid.split("::", 1)[0]
+    return shared.get(Path(path).name, path)
+
+
+def files_sharing_fixtures(tests: Path = Path(__file__).parent) -> dict[str, str]:
+    """Test file name → the fixture of :data:`SHARED_FIXTURES` that one of its functions (a test or a fixture)
+    takes as a parameter: read from the source, since the xdist controller does not collect the tests."""
+    import ast
+
+    found = {}
+    for path in sorted(tests.glob("test_*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                names = [a.arg for a in (*node.args.posonlyargs, *node.args.args, *node.args.kwonlyargs)]
+                for fixture in SHARED_FIXTURES:
+                    if fixture in names:
+                        found.setdefault(path.name, fixture)
+    return found
+
+
+def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
+    """``--dist loadgroup`` with the groups of :func:`xdist_group`.  xdist's own loadgroup marks a test's group by
+    rewriting its id, which pytest 9.2 no longer lets it do (every test would be scheduled alone, silently): the
+    groups are therefore given to the scheduler here, from the ids it is sent."""
+    if config.getoption("dist") != "loadgroup":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    shared = files_sharing_fixtures()
+
+    class GroupScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return xdist_group(nodeid, shared)
+
+    return GroupScheduling(config, log)

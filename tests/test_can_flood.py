@@ -36,6 +36,9 @@ from can.interfaces.udp_multicast.utils import unpack_message
 from isolation import claim_udp_port, realtime_slot
 from moose.canbus.codec import Codec
 
+# the command frames' schedule is judged against the wall clock: in the serial real-time phase of make test
+pytestmark = [pytest.mark.can, pytest.mark.realtime]
+
 FLOOD_RATE = 100_000
 """Junk frames per second the flooder aims at."""
 FLOOD_S = 3.0

@@ -41,7 +41,8 @@ from isolation import realtime_slot
 from moose_ros.graph import GRAPHS, TOPICS, publishes, subscribes
 from moose_ros.interfaces import type_hash, typestore
 
-pytestmark = [pytest.mark.graph, pytest.mark.slow]
+# the graph is paced in real time (rate 0.5) and holds the real-time slot: in the serial phase of make test
+pytestmark = [pytest.mark.graph, pytest.mark.slow, pytest.mark.realtime]
 
 REPO = Path(__file__).resolve().parents[1]
 NODES = [n for n in GRAPHS["full"]]  # the combined planner: both planners run

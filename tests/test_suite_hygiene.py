@@ -3,8 +3,13 @@ paper claim it records, and no test is skipped or expected to fail without sayin
 from __future__ import annotations
 
 import ast
+import re
+import subprocess
+import sys
 from pathlib import Path
 from typing import Optional
+
+import pytest
 
 TESTS = Path(__file__).resolve().parent
 
@@ -42,3 +47,39 @@ def test_no_unconditional_skip() -> None:
     for file, line, call in markers("skipif"):
         has_reason = call is not None and any(k.arg == "reason" for k in call.keywords)
         assert has_reason, f"{file}:{line}: skipif without reason"
+
+
+def test_every_test_using_a_shared_fixture_is_in_that_fixtures_parallel_group(request: pytest.FixtureRequest) -> None:
+    """The groups of ``make test``'s parallel phase (tests/conftest.py) come from the source: the collected tests
+    say which really use a shared session fixture, and each of those is in the fixture's group, as every test of
+    its file."""
+    from conftest import SHARED_FIXTURES, files_sharing_fixtures, xdist_group
+
+    shared = files_sharing_fixtures()
+    users = [item for item in request.session.items if set(getattr(item, "fixturenames", ())) & set(SHARED_FIXTURES)]
+    if not users:
+        pytest.skip("no test of this selection uses a shared fixture")
+    for item in users:
+        fixture = next(f for f in SHARED_FIXTURES if f in getattr(item, "fixturenames", ()))
+        assert xdist_group(item.nodeid, shared) == fixture, item.nodeid
+    others = [item for item in request.session.items if item.path.name not in shared]
+    for item in others:
+        assert xdist_group(item.nodeid, shared) == item.nodeid.split("::", 1)[0]
+    assert xdist_group("tests/test_tire.py::test_a[1-2]@mine", shared) == "mine"  # a group named by a marker
+
+
+@pytest.mark.slow
+def test_the_parallel_run_keeps_each_file_in_one_worker() -> None:
+    """``pytest -n 2 --dist loadgroup`` with the suite's scheduler: every test of a file runs in the same worker
+    (with xdist's own loadgroup on pytest 9.2 each test was scheduled alone)."""
+    files = ("tests/test_tire.py", "tests/test_kinematics.py")
+    out = subprocess.run([sys.executable, "-m", "pytest", "-n", "2", "--dist", "loadgroup", "-p", "no:randomly",
+                          "-p", "no:cacheprovider", "-v", *files], cwd=TESTS.parent, capture_output=True, text=True,
+                         timeout=300)
+    assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
+    workers: dict[str, set[str]] = {f: set() for f in files}
+    for line in out.stdout.splitlines():
+        found = re.match(r"\[(gw\d+)\] \[\s*\d+%\] PASSED (\S+?)::", line)
+        if found:
+            workers[found.group(2)].add(found.group(1))
+    assert all(len(w) == 1 for w in workers.values()), workers
