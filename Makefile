@@ -52,7 +52,7 @@ mutation: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[mutation]'
 	$(BIN)/python bench/mutation.py $(MODULES)
 
-# The nine planted bugs of issue 14, each caught by the default test run? (bench/planted_bugs.py; not in CI)
+# The planted bugs of issues 14 and 25, each caught by the default test run? (bench/planted_bugs.py; not in CI)
 planted-bugs: $(STAMP)
 	$(BIN)/python bench/planted_bugs.py
 

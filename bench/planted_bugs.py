@@ -4,7 +4,8 @@
     python bench/planted_bugs.py plant-torque-swap crc-dropped
     python bench/planted_bugs.py --list       # the bugs, their patches and tests
 
-The nine bugs of the audit in issue 14 (five it caught, four it missed) are the table below.  Each is a
+The nine bugs of the audit in issue 14 (five it caught, four it missed) are the table below, and one for each
+assertion issue 25 found too weak to fail on a wrong result (the bug passed the old assertion).  Each is a
 text replacement in one source file; the script copies the working tree to a temporary folder, runs the
 bug's tests there unpatched first (they must pass: a failing baseline would count every bug as caught),
 then applies the patch, runs them again, and reports ``caught`` (the tests fail) or ``MISSED``.  A patch
@@ -76,6 +77,16 @@ BUGS = (
         (("steering, torque = self.steering_alive(t), self.torque_alive(t)",
           "steering, torque = self.steering_alive(t), True"),),
         ("tests/test_can.py", "tests/test_can_plant.py")),
+    # issue 25: weak assertions made strong, each with the bug it now catches
+    Bug("solver-returns-its-start", "the MPC's default solver returns its start (cost and status as computed)",
+        "src/moose/planner/mpc/projected_newton.py",
+        (("return NewtonResult(u=self._u.copy(), f=float(info[0]),",
+          "return NewtonResult(u=np.clip(self._u0, self._lb, self._ub), f=float(info[1]),"),),
+        ("tests/test_mpc_solvers.py",)),
+    Bug("fbl-fixed-friction", "the FBL's tyres at a fixed μ = 0.9, not the vehicle's planning μ (0.8 by default)",
+        "src/moose/planner/fbl.py",
+        (("self._axles = Axles.of(vehicle, vehicle.mu)", "self._axles = Axles.of(vehicle, 0.9)"),),
+        ("tests/test_weight.py",)),
 )
 
 

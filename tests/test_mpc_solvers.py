@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 
+import casadi as ca
 import numpy as np
 import pytest
 
@@ -26,9 +27,33 @@ def test_unknown_and_duplicate_names_are_refused() -> None:
         register("paper_sqp")(Solver)
 
 
+def reference_minimum(cost: ca.Function, p: np.ndarray, starts: list[np.ndarray]) -> float:
+    """The least cost scipy's L-BFGS-B finds in the box |u| ≤ 1 from ``starts``, with CasADi's exact gradient of the
+    problem's cost: an optimum found by a solver this project does not ship."""
+    from scipy.optimize import minimize
+
+    u = ca.SX.sym("u", starts[0].size)
+    f = cost(u, p)
+    value_and_gradient = ca.Function("fg", [u], [f, ca.gradient(f, u)])
+
+    def fg(x: np.ndarray) -> tuple[float, np.ndarray]:
+        value, gradient = value_and_gradient(x)
+        return float(value), np.asarray(gradient, dtype=float).ravel()
+
+    return min(minimize(fg, x0, jac=True, method="L-BFGS-B", bounds=[(-1.0, 1.0)] * x0.size,
+                        options={"ftol": 1e-15, "gtol": 1e-12, "maxiter": 5000}).fun for x0 in starts)
+
+
+REACHED = {"converged": 1e-6, "capped": 0.02}
+"""Of the decrease from the start's cost to the optimum, the share a result may leave: none (to rounding) when the
+solver converged, 2 % when it stopped at its iteration or time cap (the real-time budget, Table II)."""
+
+
 @pytest.mark.parametrize("name", SOLVERS)
-def test_every_solver_keeps_the_contract(name: str) -> None:
-    """Bounds, a cost that is the problem's cost at the returned point, the start's cost, a status."""
+def test_every_solver_keeps_the_contract_and_reaches_the_optimum(name: str) -> None:
+    """Bounds, a cost that is the problem's cost at the returned point, the start's cost, a status — and a cost at
+    the optimum that a reference solver (scipy) finds: a solver that returned its start would keep 100 % of the
+    decrease it owes."""
     planner = MpcPlanner(MpcParams(solver=name), GRID)
     reference = build_problem(MpcParams(), GRID.N_p, GRID.t_s).cost_function  # CasADi's virtual machine
     threat = Threat(0.0, Obstacle(12.0, 14.0, -0.5, 2.4), 2.0, 2.4, 0.5, 1, 0.0)
@@ -42,8 +67,11 @@ def test_every_solver_keeps_the_contract(name: str) -> None:
     assert result.f_start == pytest.approx(float(reference(guess, p)), rel=1e-9)
     assert result.iterations >= 1 and result.evaluations >= 1 and result.reason
     assert planner.solver.cost(result.u, p) == pytest.approx(result.f, rel=1e-12)
-    if name in ("projected_newton", "paper_sqp"):  # line searches on f alone: never worse than the start
-        assert result.f <= result.f_start
+    # the optimum: from the start, from no input, and from the solver's answer (so it is never above the answer)
+    optimum = reference_minimum(reference, p, [guess, np.zeros_like(guess), result.u])
+    owed = result.f_start - optimum
+    assert owed > 100.0  # this start is far from the optimum: a solver that does nothing is far from it too
+    assert result.f - optimum <= REACHED[result.status] * owed, (result.status, result.f, optimum, result.f_start)
     if name == "paper_sqp":
         assert result.iterations <= 4 and result.evaluations <= 100
 

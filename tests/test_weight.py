@@ -308,11 +308,16 @@ def test_steering_usage_looks_at_most_at_the_plan_it_has() -> None:
 
 
 def test_the_first_step_counts_with_the_fbl_steering_not_the_kinematic_one() -> None:
-    """Row 0 is the δ* the FBL computes (the paper's δ_MPC): at straight running the front tyre alone gives the
-    lateral force, m a_y / C_f — less than the kinematic L a_y / v² of later rows at this speed."""
-    fbl = FeedbackLinearization(FblParams(), VEHICLE, 0.2)
-    first_only = plan(1.0)
+    """Row 0 is the δ* the FBL computes (the paper's δ_MPC): at straight running (v_y = γ = 0) the rear tyre has no
+    slip, so the front tyre alone gives the lateral force m a_y, and δ* is the slip angle at which Table I's magic
+    formula F_yf = μ F_zf sin(C atan(B α)), F_zf = m g l_r / (l_f + l_r), gives it — less than the kinematic
+    L a_y / v² of later rows at this speed.  The expected value is solved here from Table I, not asked of the FBL."""
+    v, a_y = VEHICLE, 1.0
+    first_only = plan(a_y)
     first_only.accel[1:] = 0.0
-    expected = abs(fbl.reference(first_only.accel[0], EST).delta) / VEHICLE.delta_max
-    assert wf(n_rho=3).steering_usage(first_only, EST) == pytest.approx(expected, rel=1e-12)
+    mu_fzf = v.mu * v.m * v.g * v.lr / (v.lf + v.lr)
+    alpha = math.tan(math.asin(v.m * a_y / mu_fzf) / v.Cy) / v.By
+    assert mu_fzf * math.sin(v.Cy * math.atan(v.By * alpha)) == pytest.approx(v.m * a_y, rel=1e-12)
+    expected = alpha / v.delta_max
+    assert wf(n_rho=3).steering_usage(first_only, EST) == pytest.approx(expected, rel=1e-9)
     assert expected < VEHICLE.wheelbase * 1.0 / 7.0**2 / VEHICLE.delta_max  # the kinematic value would be larger
