@@ -15,6 +15,7 @@ import sys
 import time
 from collections import Counter
 from pathlib import Path
+from typing import Any, Callable
 
 import pytest
 from mcap.reader import make_reader
@@ -29,6 +30,7 @@ from moose_ros.bag import BagError, BagReader, BagWriter, ReadReport, bag_info, 
 from moose_ros.graph import ACTUATOR_COMMAND
 from moose_ros.interfaces import typestore
 from moose_ros.runtime import DdsNode
+from test_cli_errors import here
 
 ROOT = Path(__file__).resolve().parents[1]
 EXTREME = ROOT / "bags" / "paper_v7_tau1.4_combined"
@@ -99,14 +101,42 @@ def cut(bag: Path, size: int, metadata: bool = True) -> Path:
     return bag
 
 
+Derive = Callable[..., Path]
+Capture = pytest.CaptureFixture[str]
+
+
+@pytest.fixture(scope="session")
+def derived(tmp_path_factory: pytest.TempPathFactory) -> Derive:
+    """``derived(dst, make, **kwargs)``: the bag ``make(path, **kwargs)`` writes from the example bag, copied to
+    ``dst`` (the test's own, to damage).  Each is written once per test session: the example bag is rewritten
+    message by message, seconds each, and several tests start from the same one."""
+    store = tmp_path_factory.mktemp("derived-bags")
+    made: dict[tuple[str, tuple[tuple[str, Any], ...]], Path] = {}
+
+    def copy(dst: Path, make: Callable[..., Any], **kwargs: Any) -> Path:
+        key = (make.__name__, tuple(sorted(kwargs.items())))
+        if key not in made:
+            path = store / str(len(made))
+            make(path, **kwargs)
+            made[key] = path
+        shutil.copytree(made[key], dst)
+        return dst
+
+    return copy
+
+
 def run(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    """``moose ARGS`` as a child process: for ``bag play``, whose publishers join the DDS graph (the other bag
+    commands run in this process, :func:`test_cli_errors.here`)."""
     return subprocess.run(MOOSE + list(args), capture_output=True, text=True, timeout=timeout)
 
 
 @pytest.mark.parametrize("metadata", [True, False])
-def test_a_type_unknown_here_is_decoded_from_the_bags_own_definition(tmp_path: Path, metadata: bool) -> None:
+def test_a_type_unknown_here_is_decoded_from_the_bags_own_definition(tmp_path: Path, metadata: bool,
+                                                                   derived: Derive,
+                                                                   capsys: Capture) -> None:
     """The review: one such message cut info, export and play off at it (200 of 5555 messages, exit 0)."""
-    bag = with_extra(tmp_path / "bag", at=200)
+    bag = derived(tmp_path / "bag", with_extra, at=200)
     if not metadata:
         (bag / "metadata.yaml").unlink()
     report = ReadReport(str(bag))
@@ -115,7 +145,7 @@ def test_a_type_unknown_here_is_decoded_from_the_bags_own_definition(tmp_path: P
     assert report.registered == ["lab_msgs/msg/Probe"]
     probe = next(m for m in messages if m.topic == "/lab/probe")
     assert (probe.msg.value, probe.msg.note) == (1.5, "hi")
-    out = run("bag", "info", str(bag))
+    out = here(capsys, "bag", "info", str(bag))
     assert out.returncode == 0 and f"messages  {TOTAL + 1}" in out.stdout and out.stderr == ""
     assert "decoded with the bag's own definition: lab_msgs/msg/Probe" in out.stdout
     played = run("bag", "play", str(bag), "--rate", "100")  # every message it can send; the probe is reported
@@ -127,8 +157,10 @@ def test_a_type_unknown_here_is_decoded_from_the_bags_own_definition(tmp_path: P
 
 
 @pytest.mark.parametrize("kind", ["no definition", "corrupt"])
-def test_an_undecodable_message_is_skipped_counted_and_reported_and_reading_goes_on(tmp_path: Path, kind: str) -> None:
-    bag = with_extra(tmp_path / "bag", at=200, definition=kind != "no definition", corrupt=kind == "corrupt")
+def test_an_undecodable_message_is_skipped_counted_and_reported_and_reading_goes_on(tmp_path: Path, kind: str,
+                                                                                   derived: Derive,
+                                                                                   capsys: Capture) -> None:
+    bag = derived(tmp_path / "bag", with_extra, at=200, definition=kind != "no definition", corrupt=kind == "corrupt")
     report = ReadReport(str(bag))
     messages = list(read_bag(bag, report=report))
     assert len(messages) == TOTAL and messages[-1].timestamp_ns == 9_000_000_000  # to the end of the bag
@@ -136,12 +168,13 @@ def test_an_undecodable_message_is_skipped_counted_and_reported_and_reading_goes
     assert report.skipped[topic]["count"] == 1 and not report.complete
     reason = "holds no definition" if kind == "no definition" else "undecodable CDR"
     assert reason in report.skipped[topic]["reason"]
-    out = run("bag", "info", str(bag))
+    out = here(capsys, "bag", "info", str(bag))
     assert out.returncode == 1 and f"messages  {TOTAL}" in out.stdout
     assert f"moose: warning: bag '{bag}': 1 message(s) on {topic}" in out.stderr and reason in out.stderr
 
 
-def test_a_truncated_bag_reads_what_is_there_and_says_what_was_lost(tmp_path: Path) -> None:
+def test_a_truncated_bag_reads_what_is_there_and_says_what_was_lost(tmp_path: Path,
+                                                                    capsys: Capture) -> None:
     """The review: a truncated bag with metadata.yaml read partially without a warning."""
     bag = tmp_path / "bag"
     shutil.copytree(EXTREME, bag)
@@ -151,7 +184,7 @@ def test_a_truncated_bag_reads_what_is_there_and_says_what_was_lost(tmp_path: Pa
     delivered = len(list(read_bag(bag, report=report)))
     assert 0 < delivered < TOTAL and sum(report.missing.values()) == TOTAL - delivered
     assert 0 < report.lost_bytes < 1000  # the last, partial record
-    out = run("bag", "export", str(bag), "-o", str(tmp_path / "csv"))
+    out = here(capsys, "bag", "export", str(bag), "-o", str(tmp_path / "csv"))
     assert out.returncode == 1 and f"{TOTAL - delivered} message(s) that metadata.yaml lists are missing" in out.stderr
     assert len(list((tmp_path / "csv").glob("*.csv"))) == len(BagReader(EXTREME).topics)  # what is there, exported
 
@@ -159,9 +192,10 @@ def test_a_truncated_bag_reads_what_is_there_and_says_what_was_lost(tmp_path: Pa
 @pytest.mark.parametrize("compression", [CompressionType.NONE, CompressionType.ZSTD])
 @pytest.mark.parametrize("metadata", [True, False])
 def test_a_bag_cut_inside_its_first_chunk_still_gives_the_complete_messages(tmp_path: Path, metadata: bool,
-                                                                           compression: CompressionType) -> None:
+                                                                           compression: CompressionType,
+                                                                           derived: Derive) -> None:
     """The review: cut at 700 KB, a chunked bag (first chunk 1 MiB) gave an empty error and nothing."""
-    bag = chunked(tmp_path / "bag", compression)
+    bag = derived(tmp_path / "bag", chunked, compression=compression)
     with open(next(bag.glob("*.mcap")), "rb") as handle:
         first = make_reader(handle).get_summary().chunk_indexes[0]
     assert first.uncompressed_size > 1_000_000  # a 1 MiB chunk
@@ -213,10 +247,12 @@ def file_order(bag: Path) -> list[tuple[str, int, bytes]]:
 
 
 @pytest.mark.parametrize("metadata", [True, False])
-def test_a_chunk_failing_its_checksum_is_skipped_and_reading_goes_on_after_it(tmp_path: Path, metadata: bool) -> None:
+def test_a_chunk_failing_its_checksum_is_skipped_and_reading_goes_on_after_it(tmp_path: Path, metadata: bool,
+                                                                             derived: Derive,
+                                                                             capsys: Capture) -> None:
     """Its data are corrupt: none of its messages is delivered (on main they were, "may be corrupt"), every other
     one is, and the report names the chunk."""
-    bag = chunked(tmp_path / "bag")
+    bag = derived(tmp_path / "bag", chunked, compression=CompressionType.NONE)
     lost = first_chunk_messages(bag)
     expected = Counter((topic, t) for topic, t, _raw in file_order(bag)[lost:])
     offset = corrupt_first_chunk(bag)
@@ -229,12 +265,13 @@ def test_a_chunk_failing_its_checksum_is_skipped_and_reading_goes_on_after_it(tm
     assert f"the chunk at byte {offset} of " in damaged and f"count {lost} message(s)" in damaged
     assert report.lost_bytes > 1_000_000  # the whole 1 MiB chunk
     assert sum(report.missing.values()) == (lost if metadata else 0)
-    out = run("bag", "info", str(bag))
+    out = here(capsys, "bag", "info", str(bag))
     assert out.returncode == 1 and "fails its checksum (its data are corrupt): skipped" in out.stderr
 
 
-def test_damaged_files_give_errors_that_say_why(tmp_path: Path) -> None:
-    bag = cut(chunked(tmp_path / "bag"), 200, metadata=False)  # inside the first chunk's header
+def test_damaged_files_give_errors_that_say_why(tmp_path: Path, derived: Derive) -> None:
+    bag = derived(tmp_path / "bag", chunked, compression=CompressionType.NONE)
+    cut(bag, 200, metadata=False)  # inside the first chunk's header
     with pytest.raises(BagError, match=r"truncated before its first complete chunk or channel: \d+ of 200 bytes"):
         list(read_bag(bag))
     empty = tmp_path / "empty"
@@ -244,10 +281,11 @@ def test_damaged_files_give_errors_that_say_why(tmp_path: Path) -> None:
         list(read_bag(empty))
 
 
-def test_a_topic_filter_naming_a_missing_topic_is_an_error_listing_the_bags_topics(tmp_path: Path) -> None:
+def test_a_topic_filter_naming_a_missing_topic_is_an_error_listing_the_bags_topics(tmp_path: Path,
+                                                                                   capsys: Capture) -> None:
     """The review: ``export --topics /nope`` exported every topic; ``play --topics /vehicle/imuu`` published every
     topic (recorded actuator commands included) into the live graph."""
-    out = run("bag", "export", str(EXTREME), "-o", str(tmp_path / "csv"), "--topics", "/nope")
+    out = here(capsys, "bag", "export", str(EXTREME), "-o", str(tmp_path / "csv"), "--topics", "/nope")
     assert out.returncode == 2 and "moose: error: topic '/nope' is not in bag" in out.stderr
     assert "/vehicle/imu, /vehicle/odom" in out.stderr and not list(tmp_path.glob("csv/*"))
     listener = DdsNode("play_victim")
@@ -284,12 +322,13 @@ def wrong_state_type(path: Path) -> Path:
     return path
 
 
-def test_replan_on_a_bag_whose_state_topic_has_another_type_is_a_clear_error(tmp_path: Path) -> None:
+def test_replan_on_a_bag_whose_state_topic_has_another_type_is_a_clear_error(tmp_path: Path,
+                                                                             capsys: Capture) -> None:
     bag = wrong_state_type(tmp_path / "bag")
     with pytest.raises(BagError, match=r"topic '/perception/state' of bag .* carries 'nav_msgs/msg/Odometry', "
                                        r"not 'moose_msgs/msg/StateEstimate'"):
         replan(bag, load_config(None))
-    out = run("bag", "replan", str(bag))
+    out = here(capsys, "bag", "replan", str(bag))
     assert out.returncode == 2 and "moose: error: topic '/perception/state'" in out.stderr
     assert "Traceback" not in out.stderr
     out = run("bag", "play", str(bag), "--rate", "100")  # nor is it published into the graph under that name
@@ -302,12 +341,13 @@ def test_replan_on_a_bag_whose_state_topic_has_another_type_is_a_clear_error(tmp
     (["replan", str(EXTREME), "--plot", "{tmp}/figure.xyz"], "expected a file ending in one of"),
 ])
 def test_bad_output_paths_of_the_bag_tools_are_errors_before_any_work(tmp_path: Path, args: list[str],
-                                                                     message: str) -> None:
+                                                                     message: str,
+                                                                     capsys: Capture) -> None:
     file = tmp_path / "a_file"
     file.write_text("x")
     fill = {"file": str(file), "tmp": str(tmp_path)}
     start = time.monotonic()
-    out = run("bag", *[a.format(**fill) for a in args])
+    out = here(capsys, "bag", *[a.format(**fill) for a in args])
     assert out.returncode == 2 and "Traceback" not in out.stderr
     assert "moose: error: " in out.stderr and message.format(**fill) in out.stderr
     assert time.monotonic() - start < 30  # refused before the re-planning (tens of seconds) ran
@@ -321,7 +361,8 @@ def test_the_example_bags_read_completely() -> None:
         assert report.recovered == ""
 
 
-def test_run_parameters_naming_an_unknown_planner_are_refused(tmp_path: Path) -> None:
+def test_run_parameters_naming_an_unknown_planner_are_refused(tmp_path: Path,
+                                                              capsys: Capture) -> None:
     """A bag whose recorded planner mode is not moose's is refused by name, not re-planned as another mode."""
     bag = tmp_path / "bag"
     shutil.copytree(EXTREME, bag)
@@ -332,18 +373,19 @@ def test_run_parameters_naming_an_unknown_planner_are_refused(tmp_path: Path) ->
     with pytest.raises(BagError, match=re.escape(f"moose.planner = 'bogus' is invalid: expected one of "
                                                  f"{list(PLANNER_MODES)}")):
         replan(bag, load_config(None))
-    out = run("bag", "replan", str(bag))
+    out = here(capsys, "bag", "replan", str(bag))
     assert out.returncode == 2 and "moose: error:" in out.stderr and "moose.planner = 'bogus'" in out.stderr
     assert "Traceback" not in out.stderr
 
 
 @pytest.mark.parametrize("section", ["/*", "observer"])
-def test_replan_refuses_a_parameter_file_section_it_would_ignore(tmp_path: Path, section: str) -> None:
+def test_replan_refuses_a_parameter_file_section_it_would_ignore(tmp_path: Path, section: str,
+                                                                 capsys: Capture) -> None:
     """The probe's ``moose bag replan --params`` with a file whose only section is ``/*``: the file's name was
     printed and the defaults used."""
     params = tmp_path / "params.yaml"
     params.write_text(f'"{section}":\n  ros__parameters:\n    vehicle: {{m: -5.0}}\n')
-    out = run("bag", "replan", str(EXTREME), "--params", str(params))
+    out = here(capsys, "bag", "replan", str(EXTREME), "--params", str(params))
     assert out.returncode == 2 and "Traceback" not in out.stderr, out.stderr
     assert f"moose: error: parameter file {str(params)!r}: section {section!r} is not applied by moose bag replan" \
         in out.stderr
@@ -373,14 +415,13 @@ def decoded(bag: Path, report: ReadReport | None = None) -> Counter:
 
 
 def test_random_damage_costs_the_damaged_chunk_only_and_the_tools_deliver_the_rest(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], derived: Derive) -> None:
     """The probe: 1,000 random bytes in the middle of a bag made ``bag info`` stop ("unreadable after 4541
     messages", rc 2, 5,575 later messages lost) and ``bag export`` write nothing.  Now the damaged chunk is
     skipped (its checksum fails), no corrupt message is delivered, everything else is, and the tools say so."""
     from moose.cli import main
 
-    bag = tmp_path / "bag"
-    ours(bag)
+    bag = derived(tmp_path / "bag", ours)
     original = decoded(bag)
     mcap = next(bag.glob("*.mcap"))
     with open(mcap, "rb") as handle:
@@ -406,13 +447,12 @@ def test_random_damage_costs_the_damaged_chunk_only_and_the_tools_deliver_the_re
     assert files == {t.strip("/").replace("/", "__"): n for t, n in topics.items()}  # every readable message
 
 
-def test_a_chunk_whose_length_is_damaged_is_found_again_at_the_next_chunk(tmp_path: Path) -> None:
+def test_a_chunk_whose_length_is_damaged_is_found_again_at_the_next_chunk(tmp_path: Path, derived: Derive) -> None:
     """The record's own length is wrong: reading resynchronises on the next record that verifies (a chunk whose
     checksum holds) instead of losing the rest of the file."""
     import struct
 
-    bag = tmp_path / "bag"
-    ours(bag)
+    bag = derived(tmp_path / "bag", ours)
     original = decoded(bag)
     mcap = next(bag.glob("*.mcap"))
     with open(mcap, "rb") as handle:
@@ -432,7 +472,7 @@ def test_a_chunk_whose_length_is_damaged_is_found_again_at_the_next_chunk(tmp_pa
 
 
 def test_a_recording_cut_between_checkpoints_is_a_bag_for_every_reader(tmp_path: Path,
-                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+                                                                        capsys: Capture) -> None:
     """What a SIGKILL leaves (the files as the writer left them, not closed): mcap's own reader (with Foxglove's
     decoder) and rosbags read every message up to the last checkpoint; on main mcap's reader raised
     RecordLengthLimitExceeded and rosbags found no metadata.yaml.  Our reader says the recording was not closed."""
@@ -459,7 +499,7 @@ def test_a_recording_cut_between_checkpoints_is_a_bag_for_every_reader(tmp_path:
     assert "was not closed" in capsys.readouterr().err
 
 
-def test_view_of_a_truncated_bag_warns_and_exits_1(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_view_of_a_truncated_bag_warns_and_exits_1(tmp_path: Path, capsys: Capture) -> None:
     """The probe: ``bag view`` drew half of a truncated bag with rc 0 and no warning."""
     from moose.cli import main
 

@@ -164,9 +164,15 @@ def test_replay_drives_the_observer_to_the_recorded_estimates(tmp_path: Path) ->
     node.subscription("moose_msgs/msg/StateEstimate", "/perception/state",
                       lambda m: live.__setitem__(round(cv.time_of(m) * 100), (m.vx, m.vy)), QOS_DEFAULT)
     stop = threading.Event()
+    sensors = ["/vehicle/imu", "/vehicle/gps", "/vehicle/wheel_speeds", "/vehicle/steering"]
     try:
-        time.sleep(3.0)  # observer up
-        sensors = ["/vehicle/imu", "/vehicle/gps", "/vehicle/wheel_speeds", "/vehicle/steering"]
+        # the observer is up: its estimate's publisher and its sensor subscriptions are discovered
+        deadline = time.monotonic() + 60.0
+        while not (node.count_publishers("/perception/state") >= 1
+                   and all(node.count_subscribers(topic) >= 1 for topic in sensors)):
+            assert observer.poll() is None, f"the observer ended (exit {observer.returncode})"
+            assert time.monotonic() < deadline, "the observer's endpoints were not discovered in 60 s"
+            node.spin_once(0.05)
         player = threading.Thread(target=play, args=(RELAXED, DdsNode("replay_player")),
                                   kwargs={"rate": 2.0, "topics": sensors, "clock": True, "stop": stop})
         player.start()

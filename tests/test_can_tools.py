@@ -142,6 +142,18 @@ def test_dump_checks_its_count_and_duration(bus) -> None:
             dump(bus, io.StringIO(), **kwargs)
 
 
+def listening(group: str, port: int) -> bool:
+    """A socket of this machine is bound to UDP ``port`` (/proc/net/udp) and one has joined the multicast ``group``
+    (/proc/net/igmp, addresses in host byte order): a receiver of that bus is ready."""
+    import socket
+
+    with open("/proc/net/udp", encoding="ascii") as f:
+        bound = any(line.split()[1].endswith(f":{port:04X}") for line in f.read().splitlines()[1:])
+    with open("/proc/net/igmp", encoding="ascii") as f:
+        joined = socket.inet_aton(group)[::-1].hex().upper() in f.read()
+    return bound and joined
+
+
 @pytest.mark.can
 def test_moose_can_replay_and_dump_over_udp_multicast_from_the_command_line(tmp_path) -> None:
     """Two processes, as a user runs them: ``moose can dump`` decodes what ``moose can replay`` sends."""
@@ -154,13 +166,17 @@ def test_moose_can_replay_and_dump_over_udp_multicast_from_the_command_line(tmp_
     log = tmp_path / "drive.log"
     good_log(log, frames=5)
     pid = os.getpid()
-    bus = ["--interface", "udp_multicast", "--channel", f"239.74.{pid % 250}.{1 + pid % 199}",
-           "--port", str(claim_udp_port())]
+    group, port = f"239.74.{pid % 250}.{1 + pid % 199}", claim_udp_port()
+    bus = ["--interface", "udp_multicast", "--channel", group, "--port", str(port)]
     moose = [sys.executable, "-m", "moose.cli", "can"]
     dumper = subprocess.Popen(moose + ["dump", "--count", "5", "--duration", "60", *bus], stdout=subprocess.PIPE,
                               stderr=subprocess.PIPE, text=True)
     try:
-        time.sleep(3.0)  # the dump has joined the group
+        deadline = time.monotonic() + 60.0
+        while not listening(group, port):  # the dump has bound the port and joined the group
+            assert dumper.poll() is None, dumper.communicate()[1]
+            assert time.monotonic() < deadline, f"no socket on UDP port {port} joined {group} in 60 s"
+            time.sleep(0.05)
         sent = subprocess.run(moose + ["replay", str(log), "--rate", "10", *bus], capture_output=True, text=True,
                               timeout=60)
         assert sent.returncode == 0 and sent.stdout.strip() == "sent 5 frames", sent.stderr

@@ -174,16 +174,21 @@ PROBE = textwrap.dedent(r'''
     import importlib, json, sys, time
     import rclpy
     expected, types, limit = set(json.loads(sys.argv[1])), json.loads(sys.argv[2]), float(sys.argv[3])
+    counts = json.loads(sys.argv[5])  # node -> [publishers, subscriptions] of the graph contract
     rclpy.init()
     node = rclpy.create_node("moose_probe")
     deadline = time.monotonic() + limit
-    seen = set()
-    while time.monotonic() < deadline and not expected <= seen:
+
+    def complete():  # every node up with at least the contract's endpoints (the test compares them exactly)
+        names = {name: ns for name, ns in node.get_node_names_and_namespaces()}
+        if not expected <= set(names):
+            return False
+        return all(len(node.get_publisher_names_and_types_by_node(name, names[name])) >= pubs
+                   and len(node.get_subscriber_names_and_types_by_node(name, names[name])) >= subs
+                   for name, (pubs, subs) in counts.items())
+
+    while time.monotonic() < deadline and not complete():
         rclpy.spin_once(node, timeout_sec=0.2)
-        seen = {name for name, ns in node.get_node_names_and_namespaces()}
-    time.sleep(2.0)  # the nodes' last endpoints
-    for _ in range(10):
-        rclpy.spin_once(node, timeout_sec=0.1)
     out = {"nodes": sorted(node.get_node_names_and_namespaces()), "endpoints": {}, "topics": {}, "rclpy_hashes": {}}
     for name, ns in out["nodes"]:
         if name in expected:
@@ -243,8 +248,10 @@ def test_rclpy_sees_every_node_its_endpoints_and_type_hashes(graph: Graph) -> No
         pytest.skip(why)
     graph.url()  # the launcher is up; its nodes are starting
     types = sorted({t.type for t in TOPICS.values()})
+    counts = {name: [len(publishes(name)), len(subscribes(name))] for name in NODES}
     probe = subprocess.run([python, "-c", PROBE, json.dumps(NODES + ["moose_monitor"]), json.dumps(types), "60",
-                            json.dumps(sorted(TOPICS))], env=env, capture_output=True, text=True, timeout=120)
+                            json.dumps(sorted(TOPICS)), json.dumps(counts)], env=env, capture_output=True, text=True,
+                           timeout=120)
     assert probe.returncode == 0, probe.stderr[-3000:]
     seen = json.loads(probe.stdout.strip().splitlines()[-1])
     names = {name for name, ns in seen["nodes"]}
