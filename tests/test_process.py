@@ -8,6 +8,8 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 from moose_ros.process import PARENT_ENV, descendants, spawn, stop
 
 WATCHER = """
@@ -47,6 +49,7 @@ def test_a_spawned_child_dies_with_its_sigkilled_parent() -> None:
     assert _state(child) in ("gone", "Z")  # killed by the parent-death signal (a zombie until init reaps it)
 
 
+@pytest.mark.realtime  # how soon, against the wall clock: the serial phase
 def test_a_child_notices_its_parent_is_gone_without_the_signal() -> None:
     """The second line of defence: a child that is not the spawner's own (no parent-death signal) but names it in
     MOOSE_PARENT_PID hears of its end through the pidfd."""
@@ -64,6 +67,7 @@ def test_a_child_notices_its_parent_is_gone_without_the_signal() -> None:
         stop([child, stand_in], grace=1.0)
 
 
+@pytest.mark.realtime  # how soon, against the wall clock: the serial phase
 def test_stop_ends_a_stopped_child_with_sigterm() -> None:
     child = spawn([sys.executable, "-c", "import signal, sys, time\n"
                    "signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))\nprint('up', flush=True)\ntime.sleep(30)"],
