@@ -219,6 +219,7 @@ def _wait_for(predicate: Any, timeout: float, what: str) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.realtime  # the sweep must still run when the third row is seen: the serial phase, cores of its own
 def test_ctrl_c_keeps_finished_cases_and_resume_runs_the_rest(tmp_path: Path) -> None:
     import psutil
 
