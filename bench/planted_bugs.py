@@ -43,8 +43,8 @@ class Bug:
 NODES = "ros2_ws/src/moose_ros/moose_ros/nodes"
 BUGS = (
     Bug("plant-torque-swap", "rear-left / rear-right torque swapped in the plant", "src/moose/vehicle.py",
-        (("t_rl = ca.fmin(ca.fmax(u[1],", "t_rl = ca.fmin(ca.fmax(u[2],"),
-         ("t_rr = ca.fmin(ca.fmax(u[2],", "t_rr = ca.fmin(ca.fmax(u[1],")),
+        (("t_rl = ca.fmin(ca.fmax(u[TORQUE_RL],", "t_rl = ca.fmin(ca.fmax(u[TORQUE_RR],"),
+         ("t_rr = ca.fmin(ca.fmax(u[TORQUE_RR],", "t_rr = ca.fmin(ca.fmax(u[TORQUE_RL],")),
         ("tests/test_vehicle.py", "tests/test_conventions.py")),
     Bug("bridge-frame-swap", "rear-left / rear-right swapped in the bridge's CAN frame", "src/moose/canbus/bridge.py",
         (('{"TorqueRL": out.torque_rl, "TorqueRR": out.torque_rr}',
