@@ -3,11 +3,11 @@ timing (issue 22: to 1 mm of clearance and 1e-3 in τ and ν), shared by the gra
 computes (``moose launch --lockstep``, :mod:`moose_ros.lockstep`)."""
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Optional
 
 import pytest
 
-from moose.config import load_config
+from moose.config import load_config, with_overrides
 from moose.metrics import summarize
 from moose.scenario import Scenario
 from moose.simulation import simulate
@@ -19,9 +19,11 @@ THREAT_TOLERANCE = 1e-3
 """τ (s) and ν against the loop's."""
 
 
-def reference(scenario: Scenario, planner: str = "combined", config_path: Any = None) -> dict[str, Any]:
-    """The summary of ``moose simulate`` for ``scenario`` (seed 0, the shipped configuration or ``config_path``)."""
-    return summarize(simulate(load_config(config_path), scenario, planner))  # type: ignore[arg-type]
+def reference(scenario: Scenario, planner: str = "combined",
+              settings: Optional[dict[str, Any]] = None) -> dict[str, Any]:
+    """The summary of ``moose simulate`` for ``scenario`` (seed 0, the shipped configuration with ``settings``,
+    ``GROUP.KEY: value`` as ``--set`` gives them)."""
+    return summarize(simulate(with_overrides(load_config(), settings or {}), scenario, planner))  # type: ignore[arg-type]
 
 
 def assert_reproduces(summary: dict[str, Any], lockstep: dict[str, Any]) -> None:

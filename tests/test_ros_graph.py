@@ -166,6 +166,16 @@ def test_full_graph_reproduces_the_lockstep_outcome() -> None:
     assert_reproduces(summary, reference(scenario))
 
 
+def test_full_graph_with_delay_compensation_reproduces_the_loop_with_it() -> None:
+    """``timing.compensate``: the planners predict through the blends they hear on /planning/blend, weight_fbl's
+    planning step through its own, the motion controller's EPS loop through its commands — as the loop does."""
+    scenario = load_scenario("paper_v7_tau1.4")
+    settings = {"timing.compensate": True}
+    summary = launch(scenario, {"scenario": "paper_v7_tau1.4", **settings}, out=io.StringIO(), lockstep=True)
+    assert summary["timing"]["compensate"] is True and summary["odom_samples"] == 901
+    assert_reproduces(summary, reference(scenario, settings=settings))
+
+
 def test_killed_planner_is_reported_and_the_graph_keeps_running() -> None:
     import dataclasses
 

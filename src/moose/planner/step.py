@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, Optional
 
 import numpy as np
 
-from ..schema import Config, PlannerMode
+from ..schema import Config, PlannerMode, TimingParams
 from ..signals import Blend, PlannerInput, PlanResult, Reference, StateEstimate, Threat
 from ..timing import AccelSchedule, DelayLine, compensated_input, predict
 from . import MODE_PLANNERS, Planner, commanded_speed, commanded_steering
@@ -68,6 +68,20 @@ def blend_path(blend: Blend, estimate: StateEstimate, t_s: float) -> np.ndarray:
 def new_obstacle(previous: Optional[Threat], current: Optional[Threat]) -> bool:
     """The re-plan trigger: ``current`` is a threat from another obstacle than ``previous`` (or the first)."""
     return current is not None and (previous is None or previous.obstacle != current.obstacle)
+
+
+def acts_from(t: float, timing: TimingParams) -> float:
+    """When the first acceleration of a plan made at ``t`` reaches the car: t + d_p + d_c."""
+    return t + timing.planning_delay_s + timing.command_delay_s
+
+
+def compensated(inp: PlannerInput, timing: TimingParams, in_flight: AccelSchedule) -> PlannerInput:
+    """The planners' input of the instant ``inp.t``: with ``timing.compensate`` predicted to when the plan acts
+    (:func:`acts_from`, :func:`moose.timing.compensated_input`) through the blends ``in_flight``; else ``inp``.
+    The planning step and the graph's planner nodes (which hear the blends on /planning/blend) both use it."""
+    if not timing.compensate:
+        return inp
+    return compensated_input(inp, acts_from(inp.t, timing), in_flight)
 
 
 class PlanningStep:
@@ -113,9 +127,7 @@ class PlanningStep:
         """What both planners receive at ``t`` (the MPC's guess is the shifted previous blend); with
         ``timing.compensate`` predicted to t + d_p + d_c (:func:`moose.timing.compensated_input`)."""
         inp = PlannerInput(t=t, estimate=estimate, threat=threat, v_des=v_des, initial_guess=self.guess, y_lane=0.0)
-        if not self.timing.compensate:
-            return inp
-        return compensated_input(inp, t + self.timing.planning_delay_s + self.timing.command_delay_s, self._in_flight)
+        return compensated(inp, self.timing, self._in_flight)
 
     def plan(self, t: float, estimate: StateEstimate, threat: Optional[Threat], v_des: float) -> PlanningRecord:
         """Run the mode's planners at ``t`` and :meth:`combine` their plans."""
@@ -153,7 +165,7 @@ class PlanningStep:
         self.guess = self.weight.next_initial_guess(blend)
         record = PlanningRecord(t, threat, mpc, msf, blend, reference, delta_mpc)
         self._plans.push(t, record)
-        self._in_flight.add(t + self.timing.planning_delay_s + self.timing.command_delay_s, blend.accel[0])
+        self._in_flight.add(acts_from(t, self.timing), blend.accel[0])
         return record
 
     def reference_at(self, t: float, estimate: StateEstimate) -> Optional[Reference]:

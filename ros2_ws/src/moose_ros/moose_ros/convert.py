@@ -286,6 +286,11 @@ def blend_from_msg(msg: Any, now: Optional[float] = None) -> Blend:
     return Blend(float(msg.weight_mpc), np.column_stack([ax, ay]))
 
 
+def stamped_blend_from_msg(msg: Any, now: Optional[float] = None) -> tuple[float, Blend]:
+    """(planning instant, blend) of a Blend."""
+    return checked_time(msg, now), blend_from_msg(msg)
+
+
 def reference_to_msg(node: Any, t: float, reference: Reference) -> Any:
     msg = node.make("moose_msgs/msg/Reference")
     stamp(msg, t)
@@ -531,14 +536,15 @@ RECORDS: dict[str, Callable[[Any, Optional[float]], Any]] = {
     THREAT.name: threat_from_msg,
     PLAN_MPC.name: stamped_plan_from_msg,
     PLAN_MSF.name: stamped_plan_from_msg,
-    BLEND.name: blend_from_msg,
+    BLEND.name: stamped_blend_from_msg,
     REFERENCE.name: reference_from_msg,
     ACTUATOR_COMMAND.name: actuator_from_msg,
     DIAGNOSTICS.name: statuses_from_msg,
 }
 """The validating converter of every topic a node subscribes to: ``convert(msg, now)`` → the core's record
-(plans: ``(instant, PlanResult)``; the threat: ``None`` when none is active; diagnostics: ``[(name, level,
-message)]``), or :class:`InvalidMessage`.  ``now``: the receiver's clock, ``None`` while it is unknown."""
+(plans: ``(instant, with threat, PlanResult)``; blends: ``(instant, Blend)``; the threat: ``None`` when none is
+active; diagnostics: ``[(name, level, message)]``), or :class:`InvalidMessage`.  ``now``: the receiver's clock,
+``None`` while it is unknown."""
 
 
 SENSOR_SAMPLES: dict[type, tuple[Topic, Callable[[Any, Any], Any]]] = {

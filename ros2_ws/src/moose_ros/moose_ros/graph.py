@@ -193,7 +193,8 @@ PLAN_MPC = Topic("/planning/mpc", "moose_msgs/msg/PlannerOutput", QOS_DEFAULT, "
 PLAN_MSF = Topic("/planning/msf", "moose_msgs/msg/PlannerOutput", QOS_DEFAULT, "5 Hz + on a new obstacle", 5.0,
                  ("msf_planner",), ("weight_fbl",), "planned accelerations, status", tolerance=2)
 BLEND = Topic("/planning/blend", "moose_msgs/msg/Blend", QOS_DEFAULT, "5 Hz", 5.0, ("weight_fbl",),
-              ("mpc_planner",), "w_MPC, the blended plan (the MPC's next initial guess), δ*, δ_MPC", tolerance=2)
+              ("mpc_planner", "msf_planner"), "w_MPC, the blended plan (the MPC's next initial guess; with "
+              "timing.compensate the accelerations in flight), δ*, δ_MPC", tolerance=2)
 REFERENCE = Topic("/control/reference", "moose_msgs/msg/Reference", QOS_DEFAULT,
                   "100 Hz (δ* re-evaluated per estimate)", 100.0, ("weight_fbl",), ("motion_controller",), "δ*, v_x*")
 ACTUATOR_COMMAND = Topic("/control/actuator_command", "moose_msgs/msg/ActuatorCommand", QOS_DEFAULT,

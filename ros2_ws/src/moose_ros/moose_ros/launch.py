@@ -36,7 +36,7 @@ from typing import Any, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
-from moose.config import load_config
+from moose.config import load_config, with_overrides
 from moose.metrics import summarize
 from moose.params import ParamError, read_ros_params
 from moose.planner import MODE_PLANNERS
@@ -288,7 +288,9 @@ def launch(
     runtimes = {name: env["MOOSE_RUNTIME"] for name, (_python, env) in children.items()}
     # the monitor: on the nodes' runtime when this interpreter can run it, else (and for a mixed graph) on Cyclone
     runtimes[MONITOR_NAME] = "rclpy" if set(runtimes.values()) == {"rclpy"} and not rclpy_missing() else "dds"
-    monitor = Monitor(scenario, scenario.configure(load_config(params_file, reader=None)))
+    # what the nodes run with: the file, then the values given to every node (timing, friction belief, --set)
+    shared = {key: value for key, value in params.items() if "." in key}
+    monitor = Monitor(scenario, scenario.configure(with_overrides(load_config(params_file, reader=None), shared)))
     node = create_node(MONITOR_NAME, overrides={"use_sim_time": False}, runtime=runtimes[MONITOR_NAME])
     recorder = live = None
     try:

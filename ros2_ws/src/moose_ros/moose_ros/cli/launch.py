@@ -15,8 +15,10 @@ from typing import Any
 
 from moose.cli.common import (
     add_scenario_arguments,
+    add_timing_argument,
     check_output_dir,
     check_output_file,
+    parse_settings,
     positive_float,
     run_folder,
     write_output,
@@ -44,6 +46,9 @@ def add_subparser(subparsers: Any) -> None:
     launch.add_argument("--runtime", choices=RUNTIMES,
                         help="what the nodes run on: rclpy (ROS 2; the interpreter of .venv-ros when this one has no "
                              "rclpy) or dds (Cyclone DDS); default: MOOSE_RUNTIME, else rclpy when importable here")
+    add_timing_argument(launch)
+    launch.add_argument("--set", action="append", default=[], metavar="GROUP.KEY=VALUE",
+                        help="change one value of the configuration for every node (e.g. timing.compensate=true)")
     launch.add_argument("--rate", type=positive_float, default=1.0, help="simulated seconds per wall-clock second")
     launch.add_argument("--lockstep", action="store_true",
                         help="step simulated time only when every node has handled the tick: the graph computes what "
@@ -78,6 +83,16 @@ def cmd_launch(args: argparse.Namespace) -> int:
                    if getattr(args, f"can_{k}") is not None})
     if args.mu_estimate is not None:  # the friction every node assumes: one value for the whole graph
         params["planning.mu_estimate"] = args.mu_estimate
+    if args.timing is not None:  # the profile's delays for every node (compensate as configured)
+        from moose.timing import profile
+
+        chosen = profile(args.timing)
+        params.update({f"timing.{k}": getattr(chosen, k) for k in ("sensor_delay_s", "planning_delay_s",
+                                                                      "command_delay_s")})
+    for key, value in parse_settings(args.set).items():
+        if "." not in key:
+            raise ParamError(f"--set {key}={value!r} is invalid: expected GROUP.KEY=VALUE")
+        params[key] = value
     planner = planner_mode(args.planner, args.config)
     json_path = check_output_file("--json", args.json)  # before the run: nothing is lost at its end
     faults = [Fault.parse(text) for text in args.fault]

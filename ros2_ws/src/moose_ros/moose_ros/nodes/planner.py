@@ -8,9 +8,10 @@ from typing import Any, Optional
 import numpy as np
 
 from moose.planner import Planner
-from moose.planner.step import new_obstacle
+from moose.planner.step import acts_from, compensated, new_obstacle
 from moose.planner.weight import WeightFunction
-from moose.signals import PlannerInput, StateEstimate, Threat
+from moose.signals import Blend, PlannerInput, StateEstimate, Threat
+from moose.timing import AccelSchedule
 
 from .. import convert as cv
 from ..graph import BLEND, PLANS, STATE, THREAT
@@ -35,8 +36,12 @@ class PlannerNode(GraphNode):
         """The estimate or the threat is stale: no plan (the plan topic falls silent, weight_fbl applies the
         other planner's)."""
         self.pub = self.publisher(PLANS[self.kind])
+        self.in_flight = AccelSchedule()
+        """The blends' first accelerations from when they reach the car: what ``timing.compensate`` predicts with
+        (the planning step's, heard on /planning/blend)."""
         self.subscribe(STATE, lambda estimate: setattr(self, "estimate", estimate))
         self.subscribe(THREAT, self.on_threat)
+        self.subscribe(BLEND, self.on_blend)
         self.period = self.config.planning.t_s
         self.next_plan = 0.0
         """Time of the next planning instant: every t_s, restarted by a new obstacle (as the lockstep loop)."""
@@ -51,6 +56,11 @@ class PlannerNode(GraphNode):
     def make_planner(self) -> Planner:
         """The planner this node runs (built once, at start)."""
         raise NotImplementedError
+
+    def on_blend(self, stamped: tuple[float, Blend]) -> None:
+        """A blend of weight_fbl (the planning step's) of the instant t: in flight from when it reaches the car."""
+        t, blend = stamped
+        self.in_flight.add(acts_from(t, self.config.timing), blend.accel[0])
 
     def on_threat(self, threat: Optional[Threat]) -> None:
         replan = new_obstacle(self.threat, threat)
@@ -79,7 +89,8 @@ class PlannerNode(GraphNode):
         if self.estimate is None or self.blocked:
             return
         t = self.now() if t is None else t
-        inp = PlannerInput(t, self.estimate, self.threat, self.v_des, self.guess, y_lane=0.0)
+        inp = compensated(PlannerInput(t, self.estimate, self.threat, self.v_des, self.guess, y_lane=0.0),
+                          self.config.timing, self.in_flight)
         result = self.planner.plan(inp)
         if result.solve_time_s > self.config.planning.t_s:  # the planning slot is over before the plan exists
             self.deadline_misses += 1
@@ -93,9 +104,9 @@ class MpcPlannerNode(PlannerNode):
 
     name, kind = "mpc_planner", "mpc"
 
-    def __init__(self, rt: Any) -> None:
-        super().__init__(rt)
-        self.subscribe(BLEND, lambda blend: setattr(self, "guess", WeightFunction.next_initial_guess(blend)))
+    def on_blend(self, stamped: tuple[float, Blend]) -> None:
+        super().on_blend(stamped)
+        self.guess = WeightFunction.next_initial_guess(stamped[1])
 
     def make_planner(self) -> Planner:
         from moose.planner.mpc import MpcPlanner

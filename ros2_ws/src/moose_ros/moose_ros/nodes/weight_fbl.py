@@ -94,7 +94,8 @@ class WeightFbl(GraphNode):
         elif not (mpc or msf):
             return
         t = (msf or mpc)[0]  # type: ignore[index]
-        record = self.step.combine(t, self.estimate, self.threat, mpc[2] if mpc else None, msf[2] if msf else None)
+        inp = self.step.planner_input(t, self.estimate, self.threat, self.estimate.vx)  # what the planners had
+        record = self.step.combine(t, inp.estimate, inp.threat, mpc[2] if mpc else None, msf[2] if msf else None)
         if late:
             self.problem("late", WARN, "mpc_planner late: MSF only for this instant")
         else:
