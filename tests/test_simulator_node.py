@@ -45,7 +45,7 @@ def test_a_command_older_than_the_timeout_stops_driving_the_plant() -> None:
         assert wait_until(lambda: commander.count_subscribers(ACTUATOR_COMMAND.name) >= 1
                           and rt.count_publishers(ACTUATOR_COMMAND.name) >= 1, 20.0, lambda: rt.spin_once(0.05))
         for _ in range(20):  # 0.2 s of coasting: no command yet
-            sim.step()
+            sim.tick()
         before = sim.plant.state
         msg = commander.make(ACTUATOR_COMMAND.type, steering_angle=0.0, steering_rate=0.0, torque_rl=TORQUE,
                              torque_rr=TORQUE)
@@ -55,7 +55,7 @@ def test_a_command_older_than_the_timeout_stops_driving_the_plant() -> None:
             rt.spin_once(0.02)
         states = []
         for _ in range(100):  # 1 s of simulated time after the single command
-            sim.step()
+            sim.tick()
             states.append(sim.plant.state)
         states = np.array(states)
     finally:
@@ -97,9 +97,9 @@ def test_on_the_can_bus_the_emulated_ecus_stop_the_car_when_the_commands_stop(le
             bridge.on_command(Command(0.05, 0.5, 20.0, 20.0), 0.01 * k)
             for frame in bridge.tick(0.01 * k):
                 bridge_side.send(frame)
-            sim.step()
+            sim.tick()
         for _ in range(1000):  # 10 s without a bridge
-            sim.step()
+            sim.tick()
         state = sim.plant.state
     finally:
         bridge_side.shutdown()

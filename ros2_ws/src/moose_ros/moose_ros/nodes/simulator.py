@@ -190,6 +190,12 @@ class VehicleSimulator(GraphNode):
             self.publish_tick()
         self.half = not self.half
 
+    def tick(self) -> None:
+        """One whole motion tick at once: the samples out, the commands received so far in, the plant's step."""
+        if not self.finished:
+            self.publish_tick()
+            self.advance()
+
     def lockstep_timer(self) -> None:
         """Lockstep: start simulated time when the graph is up, and end a run whose graph stopped reporting."""
         if self.finished:
