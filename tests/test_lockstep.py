@@ -12,9 +12,14 @@ def test_each_node_waits_for_the_root_its_upstream_and_the_feedback_one_tick_lat
     assert waits("observer", FULL) == {ROOT: 0}
     assert waits("motion_controller", FULL) == {ROOT: 0, "observer": 0, "weight_fbl": 0}
     assert waits("mpc_planner", FULL) == {"weight_fbl": 1, ROOT: 0, "observer": 0, "obstacle_detector": 0}
+    assert waits("msf_planner", FULL) == waits("mpc_planner", FULL)  # both hear the blends in flight
     assert waits(ROOT, FULL) == {n: 0 for n in FULL if n != ROOT}
-    assert waits("observer", GRAPHS["can"]) == {ROOT: 0, "can_bridge": 0}  # the bridge makes the sensor topics
-    assert listeners("weight_fbl", FULL) == 3  # the MPC (its blend), the motion controller, the simulator
+    can = GRAPHS["can"]  # the bridge makes the sensor topics and forwards the commands: it handles a tick last
+    assert waits("observer", can) == {"can_bridge": 1, ROOT: 0}  # its samples one tick later: the bus hop
+    assert waits("motion_controller", can) == {"can_bridge": 1, ROOT: 0, "observer": 0, "weight_fbl": 0}
+    assert waits("can_bridge", can) == {ROOT: 0, "motion_controller": 0}  # the tick's commands go out in the tick
+    assert waits(ROOT, can)["can_bridge"] == 0  # the simulator steps with the command frames of the tick
+    assert listeners("weight_fbl", FULL) == 4  # the planners (its blend), the motion controller, the simulator
     assert listeners(ROOT, FULL) == len(FULL) - 1
 
 
@@ -70,3 +75,24 @@ def test_a_node_left_out_runs_on_whatever_arrived() -> None:
     j.marker(ROOT, 0, (), tuple(n for n in FULL if n != "obstacle_detector"))
     j.message("/perception/state", "state0")
     assert j.take() == (0, [("/perception/state", "state0")])
+
+
+def test_the_bus_counts_frames_between_the_ecus_and_the_bridge() -> None:
+    """The CAN graph: each frame on the bus is an entry ``can`` of its sender's marker; the other side hands a tick
+    over only with all of them."""
+    from moose_ros.lockstep import BUS
+
+    can = GRAPHS["can"]
+    bridge = TickJoin("can_bridge", can)
+    bridge.add(BUS)
+    bridge.add("/control/actuator_command")
+    assert bridge.publishes == {ROOT: [BUS], "motion_controller": ["/control/actuator_command"]}
+    bridge.marker(ROOT, 0, (BUS, BUS, BUS), tuple(can))
+    bridge.marker("motion_controller", 0, ("/control/actuator_command",), None)
+    bridge.message(BUS, "IMU")
+    bridge.message("/control/actuator_command", "u0")
+    bridge.message(BUS, "WHEEL_SPEEDS")
+    assert bridge.take() is None  # the EPS frame is still on its way
+    bridge.message(BUS, "EPS_STATUS")
+    assert bridge.take() == (0, [(BUS, "IMU"), (BUS, "WHEEL_SPEEDS"), (BUS, "EPS_STATUS"),
+                                 ("/control/actuator_command", "u0")])

@@ -109,3 +109,42 @@ def test_on_the_can_bus_the_emulated_ecus_stop_the_car_when_the_commands_stop(le
         assert speed < 0.1 and abs(state[DELTA]) < 0.01
     else:
         assert speed > 2.0 and abs(state[DELTA]) > 0.02, (speed, state[DELTA])  # coasting, the steering held
+
+
+def test_a_lockstep_graph_that_stops_reporting_ends_with_lockstep_stuck() -> None:
+    """In lockstep the simulator waits for every node's tick; an observer that connects and then never reports one
+    must not hang the run: after ``lockstep_timeout`` of wall-clock time the simulator names it and ends."""
+    from moose_ros.graph import GPS, IMU, STEERING, WHEEL_SPEEDS
+    from moose_ros.lockstep import QOS_DATA, QOS_MARKER, TICK_TYPE, marker_topic
+
+    nodes = ["vehicle_simulator", "observer"]
+    rt = DdsNode("vehicle_simulator", overrides={"scenario": "paper_v7_tau1.4", "wait_for": [], "use_sim_time": False,
+                                                  "lockstep_nodes": nodes, "lockstep_timeout": 0.5})
+    silent = DdsNode("observer", overrides={"use_sim_time": False})  # reads what the simulator sends, never reports
+    ticks: list[float] = []
+    try:
+        sim = VehicleSimulator(rt)
+        for topic in (IMU, GPS, WHEEL_SPEEDS, STEERING):
+            silent.subscription(topic.type, topic.name, lambda _msg: None, QOS_DATA)
+        silent.subscription(TICK_TYPE, marker_topic("vehicle_simulator"), lambda msg: ticks.append(msg.stamp.sec),
+                            QOS_MARKER)
+        assert wait_until(lambda: sim.finished, 30.0, lambda: (rt.spin_once(0.02), silent.spin_once(0.02)))
+    finally:
+        silent.shutdown()
+        rt.shutdown()
+    assert ticks == [0]  # tick 0 went out; tick 1 never came
+    assert sim.message == "stuck" and sim.t == 0.0
+    level, text = sim.problems["lockstep_stuck"]
+    assert level == 2 and "lockstep stuck at t = 0.00 s: no tick from observer" in text, text
+
+
+def test_a_lockstep_graph_that_never_connects_ends_with_lockstep_stuck() -> None:
+    rt = DdsNode("vehicle_simulator", overrides={"scenario": "paper_v7_tau1.4", "wait_for": [], "use_sim_time": False,
+                                                  "lockstep_nodes": ["vehicle_simulator", "observer"],
+                                                  "lockstep_timeout": 0.5})
+    try:
+        sim = VehicleSimulator(rt)
+        assert wait_until(lambda: sim.finished, 30.0, lambda: rt.spin_once(0.02))
+    finally:
+        rt.shutdown()
+    assert "the graph did not connect" in sim.problems["lockstep_stuck"][1]

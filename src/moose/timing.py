@@ -117,7 +117,9 @@ class CommandHold(Generic[T]):
         """The command computed at ``t``."""
         self._line.push(t, command)
         if self._acting is None:
-            self._acting = self._first = command
+            self._acting = command
+            if self._line.ticks > 0:  # without a delay it comes out of the line at once
+                self._first = command
 
     def arrivals(self, t: float) -> list[T]:
         """The commands that reach the actuators at ``t``, in order (the first one at once, then each d_c after it

@@ -129,6 +129,14 @@ class Codec:
         return can.Message(arbitration_id=message.frame_id, data=bytes(data), is_extended_id=False,
                            timestamp=timestamp, dlc=len(data))
 
+    def own(self, frame: can.Message) -> bool:
+        """Whether ``frame`` has an identifier :attr:`node` transmits (an echo of our own frame on the bus)."""
+        try:
+            message = self.db.get_message_by_frame_id(frame.arbitration_id)
+        except KeyError:
+            return False
+        return self.node is not None and self.node in message.senders
+
     def decode(self, frame: can.Message) -> Optional[tuple[str, dict[str, float]]]:
         """``(name, signals)`` of a valid frame; ``None`` (and a counted reason) otherwise. Never raises."""
         if frame.is_error_frame:

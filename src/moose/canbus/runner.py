@@ -147,21 +147,30 @@ class BridgeRunner:
     def receive(self, stamp: Optional[float] = None) -> list[Sample]:
         """Read at most ``max_frames_per_cycle`` frames; the sensor samples among them, stamped ``stamp``."""
         t = self.clock()
-        frames, full = self.link.receive(t, self.max_frames)
         samples = []
-        for frame in frames:
-            with self._lock:
-                sample = self.core.on_frame(frame, t, stamp)
+        for frame in self.read(t):
+            sample = self.decode(frame, t, stamp)
             if sample is not None:
                 samples.append(sample)
+        return samples
+
+    def read(self, t: float) -> list[can.Message]:
+        """Read at most ``max_frames_per_cycle`` frames at ``t``, undecoded (:meth:`decode` each, in order)."""
+        frames, full = self.link.receive(t, self.max_frames)
         with self._lock:
             self.rx_frames += len(frames)
             if full:
                 self.core.note_rx_overflow()
-        return samples
+        return frames
 
-    def send_due(self, t: Optional[float] = None) -> None:
-        """Send the frames due at ``t`` (default: now on the clock); the sender thread's cycle.
+    def decode(self, frame: can.Message, t: float, stamp: Optional[float] = None) -> Optional[Sample]:
+        """One frame read at ``t``: the sensor sample it carries, stamped ``stamp`` (default ``t``), if any."""
+        with self._lock:
+            return self.core.on_frame(frame, t, stamp)
+
+    def send_due(self, t: Optional[float] = None) -> int:
+        """Send the frames due at ``t`` (default: now on the clock); the sender thread's cycle.  Returns how many
+        frames went to the bus.
 
         The command frames go first; the time they were handed to the bus is reported to the core
         before it builds the heartbeat, so a send that lands late is never followed by "commanding".
@@ -170,15 +179,19 @@ class BridgeRunner:
         with self._lock:
             commands = self.core.command_frames(t)
         sent = self.link.send(commands, t) if commands else True
+        count = len(commands) if commands and sent else 0
         with self._lock:
             if commands and sent:
                 self.core.note_sent(self.clock())
             status = self.core.status_frames(t)
         if status:
-            sent = self.link.send(status, t) and sent
+            status_sent = self.link.send(status, t)
+            count += len(status) if status_sent else 0
+            sent = status_sent and sent
         if not sent:
             with self._lock:
                 self.send_failures += 1
+        return count
 
     def diagnostics(self) -> BridgeDiagnostics:
         """Level, message and values for /diagnostics; a flood is reported since the previous call."""

@@ -5,7 +5,8 @@ Incidents come from two sources, both recorded by ``moose launch``:
 * **/diagnostics** (:meth:`IncidentLog.on_status`): every node publishes its status once a second and at
   once when its level changes (:mod:`moose_ros.nodes.base`); a new *problem* key in its ``problems``
   value becomes an incident (``stale:TOPIC`` → ``input_stale``, ``minimum_risk``/``commands_lost`` →
-  ``minimum_risk``, ``fallback`` → ``planner_fallback``, ``ecu_timeout``, ``invalid:TOPIC`` → ``input_dropped``), a
+  ``minimum_risk``, ``fallback`` → ``planner_fallback``, ``ecu_timeout``, ``invalid:TOPIC`` → ``input_dropped``,
+  ``lockstep_stuck``), a
   rise of its ``stalls`` counter a ``stalled``
   incident, any other new WARN or ERROR message a ``warning`` or ``error``; the counters
   ``deadline_misses`` and ``stalls`` are kept per node.
@@ -39,13 +40,14 @@ KINDS = {
     "input_dropped": "invalid samples dropped by a node",
     "rate_not_held": "the achieved real-time factor fell below the requested one",
     "cut_short": "the run ended before the simulator finished (Ctrl-C, SIGTERM, the time limit)",
+    "lockstep_stuck": "a lockstep graph stopped reporting its ticks: the simulator gave up waiting and ended the run",
     "warning": "another WARN status of a node",
     "error": "another ERROR status of a node",
 }
 """Every kind of incident and what it means."""
 
 DEGRADING = frozenset({"failed_to_start", "died", "fault_injected", "stalled", "input_stale", "minimum_risk",
-                       "planner_fallback", "ecu_timeout", "cut_short", "error"})
+                       "planner_fallback", "ecu_timeout", "cut_short", "lockstep_stuck", "error"})
 """Kinds that make a run degraded."""
 
 RATE_TOLERANCE = 0.9
@@ -55,7 +57,8 @@ MAX_PER_KIND = 20
 """Incidents recorded per node and kind; more are counted in the last one's ``repeats``."""
 
 _PROBLEM_KINDS = {"stale": "input_stale", "minimum_risk": "minimum_risk", "commands_lost": "minimum_risk",
-                  "fallback": "planner_fallback", "ecu_timeout": "ecu_timeout", "invalid": "input_dropped"}
+                  "fallback": "planner_fallback", "ecu_timeout": "ecu_timeout", "invalid": "input_dropped",
+                  "lockstep_stuck": "lockstep_stuck"}
 """Problem key (before ``:``) → incident kind."""
 
 

@@ -51,9 +51,9 @@ from . import convert as cv
 from .bag import Recorder
 from .bag.params import RunParameters
 from .faults import Fault, FaultInjector
-from .graph import BLEND, DIAGNOSTICS, GRAPHS, NODES, ODOM, PLAN_MPC, STEERING, THREAT
+from .graph import BLEND, DIAGNOSTICS, GRAPHS, NODES, ODOM, PLAN_MPC, STEERING, THREAT, TOPICS
 from .incidents import RATE_TOLERANCE, IncidentLog
-from .lockstep import STUCK_TIMEOUT
+from .lockstep import MONITORED, STUCK_TIMEOUT, sensor_transit
 from .parameters import check_parameter_file, node_parameters, parameter_names
 from .process import spawn
 from .runtime import create_node, process, rclpy_missing
@@ -92,12 +92,11 @@ class Monitor:
     """Invalid plans and threats dropped (moose_ros.convert validates them)."""
 
     def attach(self, node: Any) -> None:  # a tool that must not miss a sample (graph.Topic.tool_qos)
-        ODOM.tool_subscription(node, self.on_odom)
-        STEERING.tool_subscription(node, lambda m: setattr(self, "delta", m.delta))
-        PLAN_MPC.tool_subscription(node, self.on_mpc)
-        BLEND.tool_subscription(node, lambda m: self.weights.__setitem__(cv.time_of(m), m.weight_mpc))
-        THREAT.tool_subscription(node, self.on_threat)
-        DIAGNOSTICS.tool_subscription(node, self.on_diagnostics)
+        callbacks = {ODOM.name: self.on_odom, STEERING.name: lambda m: setattr(self, "delta", m.delta),
+                     PLAN_MPC.name: self.on_mpc, THREAT.name: self.on_threat, DIAGNOSTICS.name: self.on_diagnostics,
+                     BLEND.name: lambda m: self.weights.__setitem__(cv.time_of(m), m.weight_mpc)}
+        for name in MONITORED:  # a lockstep graph waits for these readers too (moose_ros.lockstep.MONITORED)
+            TOPICS[name].tool_subscription(node, callbacks[name])
 
     def on_odom(self, m: Any) -> None:
         p, q, v = m.pose.pose.position, m.pose.pose.orientation, m.twist.twist.linear
@@ -196,6 +195,7 @@ def node_overrides(graph: str, planner: str, params: Optional[dict[str, Any]] = 
         given.update(seed=seed, rate=rate, vehicle_bus="can" if "can_bridge" in nodes else "topics")
     if lockstep:
         given["lockstep_nodes"] = list(nodes)
+        given["lockstep_monitor"] = True  # this launcher's monitor reads the graph: nothing of tick 0 passes it by
     if "can_interface" in given:
         from moose.canbus.bus import INTERFACES
 
@@ -221,7 +221,9 @@ def node_overrides(graph: str, planner: str, params: Optional[dict[str, Any]] = 
         merged = _file_params(params_file, name)
         for key, value in overrides.items():
             set_dotted(merged, key, value)
-        node_parameters(name, merged)  # refuses what the node would refuse
+        config, own = node_parameters(name, merged)  # refuses what the node would refuse
+        if name == "vehicle_simulator" and lockstep:
+            sensor_transit(config, own.vehicle_bus, True)  # the CAN graph's hop is a tick: no shorter sensor delay
         out[name] = overrides
     return out
 

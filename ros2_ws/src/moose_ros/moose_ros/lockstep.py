@@ -32,16 +32,34 @@ from __future__ import annotations
 from collections import deque
 from typing import Any, Callable, Collection, Optional
 
-from .graph import CLOCK, DIAGNOSTICS, Topic, subscribes
+from .graph import (
+    ACTUATOR_COMMAND,
+    BLEND,
+    CLOCK,
+    DIAGNOSTICS,
+    ODOM,
+    PLAN_MPC,
+    STEERING,
+    THREAT,
+    Topic,
+    subscribes,
+)
 from .runtime.qos import Qos
 
 TICK_TYPE = "moose_msgs/msg/Tick"
 ROOT = "vehicle_simulator"
 """The node that owns simulated time and whose marker opens every tick."""
-PIPELINE: tuple[str, ...] = ("vehicle_simulator", "can_bridge", "observer", "obstacle_detector", "mpc_planner",
-                             "msf_planner", "weight_fbl", "motion_controller")
+PIPELINE: tuple[str, ...] = ("vehicle_simulator", "observer", "obstacle_detector", "mpc_planner", "msf_planner",
+                             "weight_fbl", "motion_controller", "can_bridge")
 """The order in which a tick flows through the graph (paper Fig. 3): a node reads tick k of the nodes before it
-and tick k − 1 of the nodes after it."""
+and tick k − 1 of the nodes after it.  The CAN bridge comes last: it forwards the tick's commands to the bus, and
+the sensor samples it decodes reach the observer and the motion controller one tick later (the bus hop)."""
+BUS = "can"
+"""The pseudo-topic of the CAN bus in a marker: one entry per frame the node sent on the bus for the tick."""
+BUS_PARTIES: tuple[str, ...] = ("vehicle_simulator", "can_bridge")
+"""Who sends frames to whom: the vehicle-ECU emulator (the simulator) and the bridge."""
+BUS_TOPICS: dict[str, tuple[str, ...]] = {"vehicle_simulator": (ACTUATOR_COMMAND.name,)}
+"""What a bus party reads as frames instead of as a topic when the graph has the bridge."""
 DEPTH = 100
 """Keep-last depth of the markers and of every input a lockstep node reads (a tick carries a few messages)."""
 QOS_MARKER = Qos(reliable=True, depth=DEPTH, transient_local=True)
@@ -50,6 +68,11 @@ QOS_DATA = Qos(reliable=True, depth=DEPTH)
 node waits for every message a marker announces."""
 MATCH_RETRY = 0.02
 """Wall-clock period (s) at which a lockstep node retries a tick it could not handle yet (discovery at start)."""
+BUS_POLL = 0.001
+"""Wall-clock period (s) at which a lockstep node on the CAN bus reads its frames (no message wakes it for them)."""
+MONITORED: tuple[str, ...] = tuple(t.name for t in (ODOM, STEERING, PLAN_MPC, BLEND, THREAT, DIAGNOSTICS))
+"""What the launcher's monitor reads (:meth:`moose_ros.launch.Monitor.attach`): with ``lockstep_monitor`` a lockstep
+publisher of these waits for its reader as for the graph's, so the summary misses nothing of tick 0."""
 STUCK_TIMEOUT = 90.0
 """Wall-clock seconds the simulator waits for one tick before it ends the run with ``lockstep_stuck``."""
 
@@ -68,7 +91,7 @@ def waits(node: str, nodes: Collection[str]) -> dict[str, int]:
     """Whose markers ``node`` waits for before it handles tick k, and the lag of each (the marker of tick k − lag),
     in the order their messages are handed over: feedback (lag 1) first, then pipeline order.  The simulator
     waits for every other node's tick k before it steps past k; every other node for the root's tick k."""
-    if node == ROOT:
+    if node == ROOT:  # the bridge's command frames of tick k are among what it waits for
         return {n: 0 for n in PIPELINE if n in nodes and n != ROOT}
     position = PIPELINE.index(node)
     out: dict[str, int] = {ROOT: 0}
@@ -77,6 +100,13 @@ def waits(node: str, nodes: Collection[str]) -> dict[str, int]:
             if publisher in nodes and publisher != node:
                 out[publisher] = 0 if PIPELINE.index(publisher) < position else 1
     return dict(sorted(out.items(), key=lambda item: (-item[1], PIPELINE.index(item[0]))))
+
+
+def readers(topic: Topic, nodes: Collection[str]) -> int:
+    """How many nodes of the graph read ``topic`` (on the CAN bus the simulator reads the commands as frames)."""
+    bus = "can_bridge" in nodes
+    return sum(1 for n in topic.subscribers if n in nodes and not (bus and n in BUS_PARTIES and topic.name in
+                                                                     BUS_TOPICS.get(n, ())))
 
 
 def listeners(node: str, nodes: Collection[str]) -> int:
@@ -94,24 +124,38 @@ class TickJoin:
     docstring).  Pure bookkeeping, no middleware: the node feeds it every input message (:meth:`message`) and
     every marker (:meth:`marker`) as they arrive, and :meth:`take` returns the next complete tick."""
 
-    def __init__(self, node: str, nodes: Collection[str], topics: Collection[str]) -> None:
+    def __init__(self, node: str, nodes: Collection[str], topics: Collection[str] = ()) -> None:
         self.node = node
         self.waits = waits(node, nodes)
-        self.topics = frozenset(topics)
-        """The topics this node reads (its queues)."""
-        publishers: dict[str, list[str]] = {}
-        for topic in data_topics(node):
-            if topic.name in self.topics:
-                for publisher in topic.publishers:
-                    publishers.setdefault(publisher, []).append(topic.name)
-        self.publishes = publishers
+        self.publishes: dict[str, list[str]] = {}
         """Upstream node → the topics of it this node reads."""
-        self.queues: dict[str, deque[Any]] = {name: deque() for name in self.topics}
+        self.queues: dict[str, deque[Any]] = {}
+        """The topics this node reads (:meth:`add`) → what arrived and is not handed over yet."""
+        for name in topics:
+            self.add(name)
         self.markers: dict[str, dict[int, tuple[str, ...]]] = {n: {} for n in self.waits}
         self.expected: dict[int, frozenset[str]] = {}
         """Tick → the nodes the graph waits for (the root's markers; the simulator's own plan)."""
         self.next = 0
         """The tick to handle next."""
+
+    @property
+    def topics(self) -> frozenset[str]:
+        """The topics this node reads."""
+        return frozenset(self.queues)
+
+    def add(self, topic: str) -> None:
+        """This node reads ``topic`` (a topic of the graph, or :data:`BUS`: the frames of the other bus party)."""
+        from .graph import TOPICS
+
+        if topic in self.queues:
+            return
+        self.queues[topic] = deque()
+        publishers = ([n for n in BUS_PARTIES if n != self.node] if topic == BUS
+                      else list(TOPICS[topic].publishers) if topic in TOPICS else [])
+        for publisher in publishers:
+            if publisher in self.waits:
+                self.publishes.setdefault(publisher, []).append(topic)
 
     def message(self, topic: str, item: Any) -> None:
         """A message on ``topic`` (an input of this node) arrived."""
@@ -179,3 +223,22 @@ def marker_message(make: Callable[..., Any], node: str, t: float, topics: list[s
 def marker_time(msg: Any) -> float:
     """The simulated time of a ``Tick`` message."""
     return float(msg.stamp.sec) + 1e-9 * float(msg.stamp.nanosec)
+
+
+def sensor_transit(config: Any, vehicle_bus: str, lockstep: bool) -> float:
+    """The sensor delay the simulator applies itself (the rest is the transport's): all of ``timing.sensor_delay_s``
+    on topics; none on the CAN bus in real time (the bus is the hop); in lockstep on the CAN bus all but the one tick
+    by which the stack reads the bridge's samples (:data:`PIPELINE`).  A :class:`moose.params.ParamError` when the
+    delay is shorter than that tick."""
+    delay = config.timing.sensor_delay_s
+    if vehicle_bus != "can":
+        return float(delay)
+    if not lockstep:
+        return 0.0
+    period = config.motion_period
+    if delay < period - 1e-9:
+        from moose.params import ParamError
+
+        raise ParamError(f"timing.sensor_delay_s = {delay!r} is invalid for the CAN graph in lockstep: its bus hop "
+                         f"is one motion tick ({period:g} s), the least sensor delay it can have")
+    return float(delay - period)

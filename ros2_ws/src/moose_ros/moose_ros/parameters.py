@@ -24,6 +24,7 @@ from moose.scenario import Scenario
 from moose.scenario.args import scenario_from_args
 
 from .graph import COMMAND_TIMEOUT, NODES
+from .lockstep import STUCK_TIMEOUT
 
 RUNTIME_PARAMETERS = frozenset({"use_sim_time", "start_type_description_service", "qos_overrides"})
 """Parameters of the middleware (ROS 2 declares them on every node): accepted on every node."""
@@ -41,6 +42,9 @@ class NodeParams:
     lockstep_nodes: tuple[str, ...] = ()
     """The nodes of the graph when it runs in lockstep (``moose launch --lockstep``, :mod:`moose_ros.lockstep`);
     empty: real time."""
+    lockstep_monitor: bool = False
+    """Lockstep: a launcher's monitor reads the graph (:data:`moose_ros.lockstep.MONITORED`); the node's publishers
+    of those topics wait for it as for the graph's readers."""
 
     def __post_init__(self) -> None:
         unknown = [n for n in self.lockstep_nodes if n not in NODES]
@@ -112,6 +116,9 @@ class SimulatorParams(ScenarioParams, CanBusParams):
     """Start without the missing ``wait_for`` nodes after this long (s, wall clock)."""
     command_timeout: float = _checked(COMMAND_TIMEOUT, positive, "a positive time (s)")
     """Actuator commands older than this (s) are ignored (zero torque and EPS rate)."""
+    lockstep_timeout: float = _checked(STUCK_TIMEOUT, positive, "a positive time (s)")
+    """Lockstep: wall-clock seconds the simulator waits for one tick (or, at the start, for the graph to connect)
+    before it ends the run with ``lockstep_stuck``."""
     faults: tuple[str, ...] = ()
     """Lockstep: the faults of the run (``NODE:kill@T``, ``NODE:stall@T:D``): from T on the graph no longer waits
     for NODE (``moose launch --lockstep --fault``)."""

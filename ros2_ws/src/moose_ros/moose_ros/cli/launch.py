@@ -71,13 +71,14 @@ def cmd_launch(args: argparse.Namespace) -> int:
     from ..bag import BagError
     from ..faults import Fault
     from ..launch import launch, planner_mode
-    from ..parameters import ScenarioParams
+    from ..parameters import NodeParams, ScenarioParams
 
     if args.commonroad is not None:  # the nodes build their scenario from a name or the ad-hoc flags, not from a file
         raise ParamError("--commonroad is not supported by moose launch: the nodes take the scenario as a name or "
                          "ad-hoc flags; run it with moose simulate --commonroad")
     scenario = scenario_from_args(args)
-    scenario_fields = [f.name for f in dataclasses.fields(ScenarioParams) if f.name != "lockstep_nodes"]
+    common = {f.name for f in dataclasses.fields(NodeParams)}  # every node's own (lockstep_nodes, …): the launcher's
+    scenario_fields = [f.name for f in dataclasses.fields(ScenarioParams) if f.name not in common]
     params = {k: getattr(args, k) for k in scenario_fields if getattr(args, k) is not None}
     params.update({f"can_{k}": getattr(args, f"can_{k}") for k in ("interface", "channel", "port")
                    if getattr(args, f"can_{k}") is not None})

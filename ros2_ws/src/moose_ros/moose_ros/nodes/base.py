@@ -46,6 +46,7 @@ from ..graph import (
 from ..lockstep import (
     DEPTH,
     MATCH_RETRY,
+    MONITORED,
     QOS_DATA,
     QOS_MARKER,
     TICK_TYPE,
@@ -54,6 +55,7 @@ from ..lockstep import (
     marker_message,
     marker_time,
     marker_topic,
+    readers,
     tick_of,
 )
 from ..parameters import node_parameters
@@ -150,7 +152,7 @@ class GraphNode:
         self._pubs: list[Any] = []
         nodes = tuple(getattr(self.params, "lockstep_nodes", ()))
         if nodes:  # lockstep (moose_ros.lockstep): supervision runs in each tick, not on a timer
-            self.join = TickJoin(self.name, nodes, [t.name for t in self.inputs_of()])
+            self.join = TickJoin(self.name, nodes)  # the inputs it reads join as the node subscribes
             self._marker = rt.publisher(TICK_TYPE, marker_topic(self.name), QOS_MARKER)
             self._pubs.append((self._marker, listeners(self.name, nodes)))
             for upstream in self.join.waits:
@@ -185,7 +187,8 @@ class GraphNode:
         qos = QOS_DATA if not topic.qos.transient_local else QOS_MARKER
         pub = self.rt.publisher(topic.type, topic.name, qos)
         nodes = tuple(getattr(self.params, "lockstep_nodes", ()))
-        self._pubs.append((pub, sum(1 for n in topic.subscribers if n in nodes and n != self.name)))
+        watched = bool(getattr(self.params, "lockstep_monitor", False)) and topic.name in MONITORED
+        self._pubs.append((pub, readers(topic, [n for n in nodes if n != self.name]) + watched))
         name = topic.name
 
         def publish(msg: Any) -> None:
@@ -211,6 +214,8 @@ class GraphNode:
         (:data:`moose_ros.convert.RECORDS`), and each valid arrival is noted for :attr:`inputs`.  An invalid
         message never reaches ``handler`` and never raises (see the module docstring)."""
         name, convert = topic.name, cv.RECORDS[topic.name]
+        if self.join is not None and topic in self.inputs_of():
+            self.join.add(name)
 
         def on_message(msg: Any) -> None:
             now = self.rt.now()
@@ -253,6 +258,7 @@ class GraphNode:
         join = self.join
         assert join is not None
         while join.next > 0 or self.matched():
+            self.poll()
             step = join.take()
             if step is None:
                 return
@@ -263,6 +269,16 @@ class GraphNode:
             self.on_tick(self.tick_time)
             self.supervise()
             self.publish_marker(k)
+
+    def poll(self) -> None:
+        """Lockstep: read what arrives other than as messages (the CAN bridge's bus) into the join.  Default:
+        nothing."""
+
+    def announce(self, what: str) -> None:
+        """Lockstep: count one more output of the tick on ``what`` (a frame on :data:`moose_ros.lockstep.BUS`); the
+        node's publishers count their messages themselves."""
+        if self.join is not None:
+            self._published.append(what)
 
     def on_tick(self, t: float) -> None:
         """Lockstep: what the node does at the tick ``t`` once its inputs of the tick are handed over (publish its

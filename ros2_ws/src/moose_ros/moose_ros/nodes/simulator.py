@@ -18,7 +18,7 @@ from moose.vehicle import VehiclePlant, initial_state
 from .. import convert as cv
 from ..faults import Fault
 from ..graph import ACTUATOR_COMMAND, CLOCK, DIAGNOSTICS, OBSTACLES, ODOM, TF
-from ..lockstep import MATCH_RETRY, ROOT, STUCK_TIMEOUT, tick_of
+from ..lockstep import BUS, BUS_POLL, MATCH_RETRY, ROOT, sensor_transit, tick_of
 from .base import ERROR, WARN, GraphNode, sensor_publishers
 
 
@@ -56,6 +56,9 @@ class TopicVehicleIo:
     def close(self) -> None:
         """Nothing to release: topics go with the node."""
 
+    def poll(self) -> None:
+        """The commands arrive as messages (the node's subscription)."""
+
     def command(self, t: float) -> np.ndarray:
         for command in self.hold.arrivals(t):
             self.guard.receive(command)
@@ -69,7 +72,13 @@ class TopicVehicleIo:
 
 
 class CanVehicleIo:
-    """The vehicle-side ECUs: sensors as frames of config/kanon.dbc, commands from the bus (ECU emulator)."""
+    """The vehicle-side ECUs: sensors as frames of config/kanon.dbc, commands from the bus (ECU emulator).
+
+    In real time the bus is the hop between the car and the stack: the frames take the time they take.  In
+    lockstep (:mod:`moose_ros.lockstep`) the bridge decodes the sensor frames of tick k at k and the stack reads them
+    one tick later (the bus hop of the sensor path: the simulator delays the samples by d_s minus that tick), and the
+    bridge sends the command frames of tick k at k, which reach the ECUs through the command delay
+    (:class:`moose.timing.CommandHold`, the frames of one tick together)."""
 
     def __init__(self, node: "VehicleSimulator") -> None:
         from moose.canbus.ecu import VehicleEcu
@@ -79,17 +88,38 @@ class CanVehicleIo:
         maneuver = (MinimumRiskManeuver(node.config.minimum_risk, ActuatorLimits.from_vehicle(node.config.vehicle),
                                         node.dt) if node.params.ecu_minimum_risk else None)
         self.ecu = VehicleEcu(timeout=node.params.command_timeout, maneuver=maneuver)
+        delay = node.config.timing.command_delay_s if node.lockstep else 0.0
+        self.hold: CommandHold[tuple[Any, ...]] = CommandHold(delay, node.dt)
+        self.inbox: list[Any] = []
+        """The command frames of the current tick."""
+        if node.join is not None:
+            node.join.add(BUS)
 
     def send(self, sample: Any, t: float) -> None:
         for frame in self.ecu.encode(sample, t):
             self.bus.send(frame)
+            self.node.announce(BUS)
+
+    def poll(self) -> None:
+        """Lockstep: the frames on the bus go to the tick join (handed over with the bridge's tick)."""
+        assert self.node.join is not None
+        while (frame := self.bus.recv(timeout=0.0)) is not None:
+            if not self.ecu.codec.own(frame):  # the multicast bus echoes our own frames
+                self.node.join.message(BUS, lambda frame=frame: self.inbox.append(frame))
 
     def close(self) -> None:
         self.bus.shutdown()
 
     def command(self, t: float) -> np.ndarray:
-        while (frame := self.bus.recv(timeout=0.0)) is not None:
-            self.ecu.on_frame(frame, t)
+        if not self.node.lockstep:
+            while (frame := self.bus.recv(timeout=0.0)) is not None:
+                self.inbox.append(frame)
+        if self.inbox:
+            self.hold.push(t, tuple(self.inbox))
+            self.inbox.clear()
+        for frames in self.hold.arrivals(t):
+            for frame in frames:
+                self.ecu.on_frame(frame, t)
         u = self.ecu.plant_input(t)
         if self.ecu.commands_lost:  # no bridge on the bus: the car is the ECUs' own, not the stack's
             what = ("the ECUs' own minimum-risk maneuver" if self.ecu.minimum_risk
@@ -124,16 +154,20 @@ class VehicleSimulator(GraphNode):
         self.t = 0.0
         self.appeared = False
         self.finished = False
-        self.pub = {"clock": CLOCK.publisher(rt), "odom": ODOM.publisher(rt), "tf": TF.publisher(rt),
+        self.pub = {"clock": CLOCK.publisher(rt), "odom": self.publisher(ODOM), "tf": TF.publisher(rt),
                     "obstacles": self.publisher(OBSTACLES)}
         self.stepped = False
         """The plant has taken a step (its specific force is the IMU's)."""
-        # the sensor path's delay (moose.timing): a sample handed over at t reaches the observer at t + d_s
-        self.in_transit: DelayLine = DelayLine(self.config.timing.sensor_delay_s, self.dt)
+        # the sensor path's delay (moose.timing): a sample handed over at t reaches the observer at t + d_s; on the
+        # CAN bus the bus is the hop (in real time all of it, in lockstep one tick: CanVehicleIo)
+        self.in_transit: DelayLine = DelayLine(sensor_transit(self.config, self.params.vehicle_bus,
+                                                              bool(self.params.lockstep_nodes)), self.dt)
         self.nodes = tuple(self.params.lockstep_nodes)
         self.faults = [Fault.parse(text) for text in self.params.faults]
         self.progress: Optional[float] = None
         """Lockstep: wall-clock time of the last tick (``None`` before simulated time starts)."""
+        self.connecting: Optional[float] = None
+        """Lockstep: since when every node has announced itself but the graph is not yet connected."""
         self.io = CanVehicleIo(self) if self.params.vehicle_bus == "can" else TopicVehicleIo(self)
         # simulated time starts once every node named in ``wait_for`` has reported (startup of the graph)
         self.waiting = set(self.params.wait_for)
@@ -141,7 +175,7 @@ class VehicleSimulator(GraphNode):
         self.wall_start: Optional[float] = None
         self.subscribe(DIAGNOSTICS, self.on_diagnostics)
         if self.lockstep:  # the graph paces simulated time (moose_ros.lockstep)
-            rt.timer(MATCH_RETRY, self.lockstep_timer)
+            rt.timer(BUS_POLL if self.params.vehicle_bus == "can" else MATCH_RETRY, self.lockstep_timer)
         else:  # wall-clock pacing: one motion step every dt / rate seconds; simulated time is published on /clock
             rt.timer(self.dt / self.params.rate / 2.0, self.step)
         self.half = False
@@ -200,26 +234,38 @@ class VehicleSimulator(GraphNode):
         """Lockstep: start simulated time when the graph is up, and end a run whose graph stopped reporting."""
         if self.finished:
             return
+        now = time.monotonic()
         if self.progress is None:
             if self.started():
-                self.progress = time.monotonic()
+                self.progress = now
                 self.publish_tick()
+            elif not self.waiting:  # every node announced itself, but not every reader is connected
+                self.connecting = self.connecting or now
+                if now - self.connecting > self.params.lockstep_timeout:
+                    self.stuck(now - self.connecting, "the graph did not connect (a publisher without its readers)")
             return
-        waited = time.monotonic() - self.progress
-        if waited > STUCK_TIMEOUT:
+        self._pump()  # the bus's frames, read here (no message wakes the node for them)
+        if self.finished:
+            return
+        if now - self.progress > self.params.lockstep_timeout:
             assert self.join is not None
             k = self.join.next
             missing = [n for n, lag in self.join.waits.items() if n in self.expected(self.t)
                        and k - lag not in self.join.markers[n]]
-            self.problem("lockstep_stuck", ERROR, f"lockstep stuck at t = {self.t:.2f} s: no tick from "
-                                                  f"{', '.join(missing) or 'the graph'} for {waited:.0f} s")
-            self.finish("stuck")
+            self.stuck(now - self.progress, f"no tick from {', '.join(missing) or 'the graph'}")
+
+    def stuck(self, waited: float, why: str) -> None:
+        """Lockstep: the graph stopped reporting; end the run and say so (``lockstep_stuck``)."""
+        self.problem("lockstep_stuck", ERROR, f"lockstep stuck at t = {self.t:.2f} s: {why} for {waited:.1f} s "
+                                              "(wall clock)")
+        self.finish("stuck")
 
     def _pump(self) -> None:
         """Lockstep: step the plant past tick k once every expected node has reported it (with its commands)."""
         join = self.join
         assert join is not None
         while not self.finished and self.progress is not None:
+            self.io.poll()
             step = join.take()
             if step is None:
                 return
