@@ -2,8 +2,12 @@
 
 A fault is ``NODE:kill@T`` (SIGKILL at simulated time T) or ``NODE:stall@T:D`` (SIGSTOP at T, SIGCONT D
 simulated seconds later, i.e. D / rate wall-clock seconds: a stalled simulator stops simulated time
-itself).  Without a simulator (the ``car`` graph) T counts wall-clock seconds from the start.  Every
-fault is recorded as an incident (``fault_injected``), so a run with a fault is always degraded.
+itself).  Without a simulator (the ``car`` graph) T counts wall-clock seconds from the start.  In lockstep
+(``moose launch --lockstep``) T is simulated time and the graph stops waiting for the faulted node from T on; a
+stall ends at T + D simulated, but the stalled node catches up in less simulated time than that (a stall is a
+wall-clock fault: the fault matrix runs stalls at real time).  Every fault is recorded as an incident
+(``fault_injected``), so a run with a fault is always degraded; whether its *consequence* was reported, by the node
+that should detect it, is :func:`reported` (:data:`DETECTORS`).
 
 The **fault matrix** (:func:`run_matrix`, ``python -m moose_ros.faults --write docs/design.md``) runs
 the kill and the stall of every node of the ``full`` and the ``can`` graph on :data:`MATRIX_SCENARIO`, and
@@ -159,10 +163,38 @@ def matrix_cases(graph: str) -> list[Fault]:
             for node in GRAPHS[graph] for action in ("kill", "stall")]
 
 
+DETECTORS: dict[str, tuple[tuple[str, str], ...]] = {
+    "observer": (("motion_controller", "minimum_risk"),),
+    "obstacle_detector": (("weight_fbl", "input_stale"),),
+    "mpc_planner": (("weight_fbl", "planner_fallback"),),
+    "msf_planner": (("weight_fbl", "planner_fallback"),),
+    "weight_fbl": (("motion_controller", "minimum_risk"),),
+    "motion_controller": (("vehicle_simulator", "minimum_risk"), ("can_bridge", "minimum_risk")),
+    "can_bridge": (("vehicle_simulator", "ecu_timeout"),),
+    "vehicle_simulator": (("launch", "cut_short"),),
+}
+"""The consequence of losing each node, as (the node that must detect it, the incident it reports): the motion
+controller runs the minimum-risk maneuver without the estimate or the reference; weight_fbl reports the threat
+stale, or a planner's plan missing (fallback); the actuators' guard (the simulator's topic input, or the CAN
+bridge's) runs it without commands; the vehicle ECUs time out without the bridge; a killed simulator cuts the run
+short.  The fault's own ``fault_injected`` and the ``died`` of the faulted node are no detection.  A stalled
+simulator stops simulated time with it: nothing of the graph can notice, and nothing has to."""
+
+
+def reported(fault: Fault, summary: dict[str, Any]) -> bool:
+    """Whether the run reported the fault's consequence from a node that detects it (:data:`DETECTORS`); a stall of
+    the simulator has nothing to report."""
+    if fault.node == "vehicle_simulator" and fault.action == "stall":
+        return True
+    seen = {(i["node"], i["kind"]) for i in summary["incidents"]}
+    return any(detector in seen for detector in DETECTORS[fault.node])
+
+
 def run_case(graph: str, fault: Fault, rate: float = 1.0, seed: int = 0,
-             params: Optional[dict[str, Any]] = None, duration: float = MATRIX_DURATION) -> dict[str, Any]:
+             params: Optional[dict[str, Any]] = None, duration: float = MATRIX_DURATION,
+             lockstep: bool = False) -> dict[str, Any]:
     """One run of the matrix: the launcher's summary of ``graph`` on :data:`MATRIX_SCENARIO` with ``fault``,
-    ``duration`` simulated seconds after the obstacle appears."""
+    ``duration`` simulated seconds after the obstacle appears (``lockstep``: in lockstep, ``rate`` not used)."""
     import io
 
     from moose.scenario import load_scenario
@@ -173,7 +205,7 @@ def run_case(graph: str, fault: Fault, rate: float = 1.0, seed: int = 0,
     scenario = dataclasses.replace(scenario, duration=duration)
     out = io.StringIO()
     given = {"scenario": MATRIX_SCENARIO, "duration": duration, **(params or {})}
-    summary = launch(scenario, given, graph=graph, seed=seed, rate=rate, faults=[fault], out=out)
+    summary = launch(scenario, given, graph=graph, seed=seed, rate=rate, faults=[fault], out=out, lockstep=lockstep)
     summary["log"] = out.getvalue()
     return summary
 
