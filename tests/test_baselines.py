@@ -158,6 +158,7 @@ def test_the_node_graph_runs_a_baseline_in_the_msf_planners_place(mode: str) -> 
     steps in lockstep (``--lockstep``): what it computes, whatever the machine's load."""
     import io
 
+    from lockstep_reference import assert_reproduces
     from moose_ros.launch import launch
 
     scenario = dataclasses.replace(load_scenario("paper_v6_w2.4"), duration=4.0)
@@ -166,3 +167,4 @@ def test_the_node_graph_runs_a_baseline_in_the_msf_planners_place(mode: str) -> 
     lockstep = summarize(simulate(CONFIG, scenario, mode))
     assert summary["outcome"] == lockstep["outcome"] == {"aeb": "stopped_short", "max_steer": "lost_control"}[mode]
     assert summary["max_abs_steer_rad"] == pytest.approx(lockstep["max_abs_steer_rad"], abs=0.01)
+    assert_reproduces(summary, lockstep)  # clearance to 1 mm, τ and ν to 1e-3
