@@ -125,6 +125,10 @@ def table(results: dict[str, Any]) -> str:
              f"start, {meta['loadavg_end']:.1f} at the end); `python bench/bench_realtime.py --write "
              "docs/design.md`. Latency: IMU sample → the actuator command of its tick, over every tick of every "
              "run. Lockstep: `moose simulate` with the command path's delay raised by 0 / 10 / 20 ms.", "",
+             *([f"Load: {meta['note']}.", ""] if meta.get("note") else []),
+             *(line for row in results["rows"] if row.get("source")
+               for line in (f"Rows of {row['runtime']}, compensate {str(row['compensate']).lower()}: "
+                            f"{row['source']}.", "")),
              "| runtime | compensate | outcomes | clearance min / median / max (m) | latency p50 / p99 (ms) | "
              "degraded runs | lockstep +0 / +10 / +20 ms (m) |",
              "|---|---|---|---|---|---|---|"]
@@ -163,6 +167,7 @@ def main() -> None:
     parser.add_argument("--out", default=str(REPO / "bench" / "results" / "realtime.json"))
     parser.add_argument("--write", help="regenerate the table in this Markdown file (docs/design.md)")
     parser.add_argument("--from-json", help="regenerate the table from this result file, without running")
+    parser.add_argument("--keep", help="an earlier result file whose rows of the runtimes not measured now are kept")
     parser.add_argument("--measure", nargs=2, metavar=("RUNS", "COMPENSATE"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.measure:
@@ -175,6 +180,11 @@ def main() -> None:
         results = json.loads(Path(args.from_json).read_text(encoding="utf-8"))
     else:
         results = run_all(args)
+        if args.keep:
+            earlier = json.loads(Path(args.keep).read_text(encoding="utf-8"))
+            kept = [row for row in earlier["rows"] if row["runtime"] not in args.runtimes]
+            results["rows"] = sorted(kept + results["rows"], key=lambda r: (r["runtime"] != "dds", r["compensate"]))
+            results["kept"] = {"from": earlier.get("machine"), "runtimes": sorted({r["runtime"] for r in kept})}
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         Path(args.out).write_text(json.dumps(results, indent=1) + "\n", encoding="utf-8")
         print(f"bench_realtime: wrote {args.out}")
