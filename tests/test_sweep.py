@@ -219,15 +219,16 @@ def _wait_for(predicate: Any, timeout: float, what: str) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.realtime  # the sweep must still run when the third row is seen: the serial phase, cores of its own
 def test_ctrl_c_keeps_finished_cases_and_resume_runs_the_rest(tmp_path: Path) -> None:
     import psutil
 
     out = tmp_path / "s"
-    # 24 cases of a few tenths of a second each (a 10 kHz plant step), so that the sweep is still running
-    # when the third row is seen and Ctrl-C arrives
-    args = MOOSE + ["sweep", "--speed", "5,6", "--tau", "1.5,2,2.5", "--nu", "0.3,0.6", "--planner", "msf,combined",
-                    "--duration", "3", "--set", "simulation.plant_dt=0.0001", "-o", str(out), "--workers", "2",
+    # 24 cases at a 10 kHz plant step: 12 of 3 s (a few tenths of a second of work each) and 12 of 20 s (a couple
+    # of seconds each), so that when the third row is seen the sweep still has seconds of work for both cores left
+    # and Ctrl-C arrives while it runs, even when this test process waits seconds for a core (with only the short
+    # cases, a loaded machine once let the sweep finish before the test saw its third row)
+    args = MOOSE + ["sweep", "--speed", "5,6", "--tau", "1.5,2,2.5", "--nu", "0.3", "--planner", "msf,combined",
+                    "--duration", "3,20", "--set", "simulation.plant_dt=0.0001", "-o", str(out), "--workers", "2",
                     "--quiet"]
     process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                start_new_session=True)
