@@ -126,6 +126,10 @@ def table(results: dict[str, Any]) -> str:
              "docs/design.md`. Latency: IMU sample → the actuator command of its tick, over every tick of every "
              "run. Lockstep: `moose simulate` with the command path's delay raised by 0 / 10 / 20 ms.", "",
              *([f"Load: {meta['note']}.", ""] if meta.get("note") else []),
+             *([f"Rows of {', '.join(results['kept']['runtimes'])} from an earlier run (load average "
+                f"{results['kept']['from']['loadavg_start']:.1f} at its start, "
+                f"{results['kept']['from']['loadavg_end']:.1f} at its end; {results['kept']['from'].get('note', '')})."
+                , ""] if results.get("kept") else []),
              *(line for row in results["rows"] if row.get("source")
                for line in (f"Rows of {row['runtime']}, compensate {str(row['compensate']).lower()}: "
                             f"{row['source']}.", "")),
