@@ -47,7 +47,7 @@ test: $(STAMP)
 	@echo "line coverage of src/moose: $$($(COVERAGE) report --include='src/moose/*' --format=total) % (floor $(COVERAGE_FLOOR) %)"
 
 # Mutation score of the safety- and verdict-critical modules (bench/mutation.py; about 12 min on 2 cores; not in CI).
-# One module: make mutation MODULES=canbus.codec.  The table in docs/design.md: bench/mutation.py --table --docs
+# One module: make mutation MODULES=canbus.codec.  The table in docs/testing.md: bench/mutation.py --table --docs
 mutation: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[mutation]'
 	$(BIN)/python bench/mutation.py $(MODULES)
@@ -65,7 +65,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/bench_sweep.py
 	$(BIN)/python bench/bench_sweep_per_core.py
 
-# the shipped criticality map of the paper region (README, docs/design.md): ~2,700 cases, a few minutes on 2 cores
+# the shipped criticality map of the paper region (docs/maps.md): ~2,700 cases, a few minutes on 2 cores
 MAP := docs/maps/paper_region
 map: $(STAMP)
 	rm -rf $(MAP)

@@ -14,7 +14,7 @@ latency, which the lockstep graph (and the timing model) does not have beyond it
 Reported per configuration: the outcome distribution, the spread of the minimum clearance, the p50/p99 latency
 over every tick of every run, and the lockstep prediction at that latency: ``moose simulate`` with the same timing
 and the command path's delay raised by 0, 10 and 20 ms (the grid of ``moose budget``; the extreme case's budget is
-0 ms, docs/design.md "Latency budget").  Written: ``bench/results/realtime.json`` (``--out``) and, with
+0 ms, docs/architecture.md "Latency budget").  Written: ``bench/results/realtime.json`` (``--out``) and, with
 ``--write docs/design.md``, the generated table between ``<!-- BEGIN realtime -->`` and ``<!-- END realtime -->``.
 Every process is on loopback, in a DDS domain claimed with ``tests/isolation.py``.  About 30 min on 2 cores.
 Run: ``python bench/bench_realtime.py [--runs 20] [--load 2] [--write docs/design.md]``.

@@ -3,7 +3,7 @@
     python bench/mutation.py                    # every module of MODULES (about 12 min on 2 cores)
     python bench/mutation.py canbus.codec planner.fbl   # some of them
     python bench/mutation.py --table            # only print the table from the stored results
-    python bench/mutation.py --docs             # ... and write it into docs/design.md
+    python bench/mutation.py --docs             # ... and write it into docs/testing.md
 
 Each module is mutated in a temporary copy of the working tree (so the tree itself never holds a
 mutant), with ``mutmut run`` over the module's tests (:data:`MODULES`, without the ``graph`` and
@@ -47,7 +47,7 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "bench" / "results" / "mutation"
 EQUIVALENT = ROOT / "bench" / "mutation_equivalent.yaml"
-DESIGN = ROOT / "docs" / "design.md"
+DOCS = ROOT / "docs" / "testing.md"
 TARGET = 0.85
 BEGIN, END = "<!-- mutation-table:begin (bench/mutation.py --docs) -->", "<!-- mutation-table:end -->"
 
@@ -221,12 +221,12 @@ def table(rows: list[dict[str, Any]]) -> str:
 
 
 def write_docs(text: str) -> None:
-    design = DESIGN.read_text()
+    design = DOCS.read_text()
     if BEGIN not in design or END not in design:
-        raise SystemExit(f"mutation: error: {DESIGN} has no {BEGIN} … {END} markers")
+        raise SystemExit(f"mutation: error: {DOCS} has no {BEGIN} … {END} markers")
     head, rest = design.split(BEGIN, 1)
     _, tail = rest.split(END, 1)
-    DESIGN.write_text(f"{head}{BEGIN}\n{text}\n{END}{tail}")
+    DOCS.write_text(f"{head}{BEGIN}\n{text}\n{END}{tail}")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -234,7 +234,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("modules", nargs="*", metavar="MODULE", help=f"some of: {', '.join(MODULES)}")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="mutants run at once")
     parser.add_argument("--table", action="store_true", help="no run: the table from the stored results")
-    parser.add_argument("--docs", action="store_true", help="write the table into docs/design.md")
+    parser.add_argument("--docs", action="store_true", help="write the table into docs/testing.md")
     parser.add_argument("--keep", action="store_true", help="keep the temporary tree (to inspect mutants)")
     args = parser.parse_args(argv)
     unknown = [m for m in args.modules if m not in MODULES]

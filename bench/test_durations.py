@@ -1,7 +1,7 @@
 """Where the test suite's time goes: a table per test file from the JUnit XML reports of a ``make test`` run.
 
     python bench/test_durations.py                 # print the table of the last make test
-    python bench/test_durations.py --docs          # ... and write it into docs/design.md ("Testing")
+    python bench/test_durations.py --docs          # ... and write it into docs/testing.md ("Testing")
     python bench/test_durations.py a.xml b.xml     # the table of other reports
 
 ``make test`` writes one report per phase to ``runs/tests/`` (the parallel phase, ``pytest -n 2``, and the serial

@@ -84,7 +84,7 @@ def pytest_runtest_setup(item: pytest.Item) -> Iterator[None]:
 def pytest_runtest_teardown(item: pytest.Item) -> Iterator[None]:
     """The CPU seconds a test took, setup to teardown, in the test process and in the child processes it waited
     for (nodes, CLI runs, and their children), as properties of its report: ``--junitxml`` writes them and
-    bench/test_durations.py tabulates them (docs/design.md, "Testing")."""
+    bench/test_durations.py tabulates them (docs/testing.md, "Testing")."""
     result = yield
     if CPU_AT_SETUP in item.stash:
         (own0, children0), (own1, children1) = item.stash[CPU_AT_SETUP], _cpu_seconds()

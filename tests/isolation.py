@@ -10,7 +10,7 @@ so two concurrent runs never share a bus.
 Tests whose verdict depends on the wall clock (a graph paced in real time, the CAN bridge's schedule under a
 flood) hold the machine's **real-time slot** (:func:`realtime_slot`, marker ``realtime``): one such test at a
 time on the machine, the others of concurrent runs wait for it.  The graph needs cores of its own to keep
-its timing (docs/design.md, "The graph on rclpy"); two runs that each start eight node processes at once
+its timing (docs/ros2.md, "The graph on rclpy"); two runs that each start eight node processes at once
 take them from each other.
 """
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """``moose benchmark``: the leaderboard's measures as defined (moose.benchmark), and the command end to end on a small
-region (the real one is 4,500 cases: README.md's leaderboard)."""
+region (the real one is 4,500 cases: docs/benchmarks.md's leaderboard)."""
 from __future__ import annotations
 
 import re
@@ -48,7 +48,7 @@ def test_the_command_runs_every_planner_and_writes_the_leaderboard(tmp_path: Pat
     """On a region of two cells per friction and planner: the sweep, leaderboard.md and .png in the folder, the
     figure where asked, and the generated block of a document; a second run with --resume only draws again."""
     monkeypatch.setattr(benchmark, "AXES", {**benchmark.AXES, "speed": "7", "tau": "1.5,3", "nu": "0.5", "mu": "0.8"})
-    doc = tmp_path / "README.md"
+    doc = tmp_path / "benchmarks.md"
     doc.write_text("before\n<!-- BEGIN leaderboard -->\nold\n<!-- END leaderboard -->\nafter\n", encoding="utf-8")
     out, figure = tmp_path / "bench", tmp_path / "docs" / "leaderboard.png"
     args = ["benchmark", "-o", str(out), "--workers", "1", "--quiet", "--write", str(doc), "--figure", str(figure)]

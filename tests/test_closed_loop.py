@@ -56,7 +56,7 @@ EXTREME_AT_THE_EDGE = pytest.mark.xfail(strict=True, raises=AssertionError, reas
     "paper claim (Dodging the Moose, Sec. VI-C): at tau = 1.4 s, nu = 0.95 the combined planner avoids the "
     "obstacle.  With the car's latency chain (the default timing, 40 ms from sample to actuator) the margin is "
     "gone: seed 0 passes with 0.02 m, seed 1 collides (-0.02 m); seeds 0-9 collide in 7 of 10 (-0.04 to +0.03 m), "
-    "while all ten pass with --timing ideal (docs/design.md, 'Latency budget')"))
+    "while all ten pass with --timing ideal (docs/architecture.md, 'Latency budget')"))
 
 
 @pytest.mark.parametrize("name, seed", [

@@ -1,4 +1,4 @@
-"""The docs match the code and stay inside the repository: docs/design.md's module maps name every module of
+"""The docs match the code and stay inside the repository: docs/architecture.md's module maps name every module of
 ``moose`` and ``moose_ros`` and only those, a package's row names each of its modules, and every link of
 every Markdown file points to a file of the repository."""
 from __future__ import annotations
@@ -9,14 +9,14 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-DESIGN = (ROOT / "docs" / "design.md").read_text(encoding="utf-8")
+ARCHITECTURE = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
 PACKAGES = {"core": (ROOT / "src" / "moose", "## Module map (core)"),
-            "moose_ros": (ROOT / "ros2_ws" / "src" / "moose_ros" / "moose_ros", "Module map of `moose_ros`:")}
+            "moose_ros": (ROOT / "ros2_ws" / "src" / "moose_ros" / "moose_ros", "## Module map (`moose_ros`)")}
 
 
 def table_after(heading: str) -> dict[str, str]:
     """Module name → the rest of its row, from the first table after ``heading``."""
-    text = DESIGN[DESIGN.index(heading):]
+    text = ARCHITECTURE[ARCHITECTURE.index(heading):]
     rows: dict[str, str] = {}
     started = False
     for line in text.splitlines()[1:]:
@@ -40,7 +40,7 @@ def modules(folder: Path) -> set[str]:
 def test_the_module_map_names_every_module_and_only_modules(package: str) -> None:
     folder, heading = PACKAGES[package]
     rows = table_after(heading)
-    assert modules(folder) - set(rows) == set(), "modules missing from docs/design.md's map"
+    assert modules(folder) - set(rows) == set(), "modules missing from docs/architecture.md's map"
     assert set(rows) - modules(folder) == set(), "the map names modules that do not exist"
 
 
@@ -70,10 +70,10 @@ def test_every_link_points_into_the_repository(path: Path) -> None:
 
 
 def test_every_equation_label_quoted_is_in_the_table_of_the_papers_equations() -> None:
-    """A reader with the printed paper finds every ``eq. (label)`` of the docs and docstrings in docs/design.md's
-    table of the paper's equations, which gives its printed number."""
-    start = DESIGN.index("### The paper's equations and figures")
-    table = DESIGN[start:DESIGN.index("\nFigures:", start)]
+    """A reader with the printed paper finds every ``eq. (label)`` of the docs and docstrings in
+    docs/architecture.md's table of the paper's equations, which gives its printed number."""
+    start = ARCHITECTURE.index("## The paper's equations and figures")
+    table = ARCHITECTURE[start:ARCHITECTURE.index("\nFigures:", start)]
     listed = set(re.findall(r"\(([A-Za-z]+)\)", "".join(line.split("|")[1] for line in table.splitlines()
                                                        if line.startswith("| ("))))
     quoted: dict[str, str] = {}
@@ -86,4 +86,4 @@ def test_every_equation_label_quoted_is_in_the_table_of_the_papers_equations() -
     quoted.pop("label", None)  # the convention's own placeholder
     assert {"skin", "ysafe", "planmpc", "FBL"} <= set(quoted)  # the search finds what it is for
     missing = {label: where for label, where in quoted.items() if label not in listed}
-    assert not missing, f"labels quoted but not in docs/design.md's table of the paper's equations: {missing}"
+    assert not missing, f"labels quoted but not in docs/architecture.md's table of the paper's equations: {missing}"

@@ -166,8 +166,8 @@ def test_setup_entry_points_and_compose_follow_the_contract() -> None:
 
 
 def test_docs_topic_table_is_the_contracts() -> None:
-    design = (ROOT / "docs" / "design.md").read_text(encoding="utf-8")
-    assert topic_table() in design, \
+    graph = (ROOT / "docs" / "graph.md").read_text(encoding="utf-8")
+    assert topic_table() in graph, \
         "regenerate with: python -c 'from moose_ros.graph import topic_table; print(topic_table())'"
 
 

@@ -30,7 +30,7 @@ SCENARIO = "paper_v6_w2.4"
 AHEAD_TOLERANCE = 1e-12
 """m/s²: the blends of the graph against the loop's while the obstacle is more than half a second ahead.  The one
 difference between the two is time itself (a message's stamp in nanoseconds against the loop's k · Δt in floating
-point, 1e-18 s; docs/design.md "Lockstep"): measured 1e-14 m/s²."""
+point, 1e-18 s; docs/graph.md "Lockstep"): measured 1e-14 m/s²."""
 ACCEL_TOLERANCE = 5e-3
 """m/s², at every instant: near the obstacle (τ 0.45 → 0.26 s here) a discrete decision of the plan taken on that
 1e-15 difference moves the blends by 6e-5 m/s², and after it they stay within 8e-4 m/s² of the loop's (measured);

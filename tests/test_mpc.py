@@ -207,7 +207,7 @@ def test_example_eta_steers_at_the_bound_without_braking(eta: tuple[float, float
 
 def test_relaxed_case_clears_the_zone_and_returns_to_the_lane() -> None:
     """v = 5 m/s, zone 25–27 m ahead, w = 2 m, Example 2's first weight set, every plan
-    solved to convergence (docs/design.md, "MPC": at the paper's caps the capped first plan
+    solved to convergence (docs/modelling.md, "MPC": at the paper's caps the capped first plan
     decides between this manoeuvre and a crawl in front of the zone)."""
     th = threat(w=2.0, x_min=25.0)
     converged = MpcParams(eta=EQUAL, caps=SolverCaps(max_iter=200, max_fun_evals=2000))
@@ -223,7 +223,7 @@ def test_relaxed_case_clears_the_zone_and_returns_to_the_lane() -> None:
 def test_relaxed_case_at_the_paper_caps_never_enters_the_zone(eta: tuple[float, float, float, float]) -> None:
     """At the paper's caps MPC alone may slow down to a crawl in front of the zone instead of
     passing (η₃ = 0.05 makes braking cheap, and braking lowers y_safe; with the equal weights
-    it depends on the capped first plan: docs/design.md), but it never enters it and never reverses."""
+    it depends on the capped first plan: docs/modelling.md), but it never enters it and never reverses."""
     th = threat(w=2.0, x_min=25.0)
     traj, results = receding_horizon(MpcParams(eta=eta), th, [0.0, 0.0, 5.0, 0.0], 5.0, steps=60)
     inside = [th.obstacle.contains(x, y) for x, y in traj[:, :2]]

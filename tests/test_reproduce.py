@@ -1,5 +1,5 @@
 """``moose reproduce``: the paper's claims judged by the runs on both roads, the readings the paper leaves open side by
-side, and docs/design.md and README.md generated from them.
+side, and the pages docs/modelling.md, docs/results.md and README.md generated from them.
 
 The runs come from the session's :class:`moose.reproduce.RunCache` (``paper_runs``, tests/conftest.py), which the
 closed-loop tests share.  Besides the staleness of the documents, the verdicts and the key numbers are pinned here:
@@ -36,8 +36,10 @@ from moose.reproduce import (
 )
 
 ROOT = Path(__file__).resolve().parents[1]
-DESIGN = ROOT / "docs" / "design.md"
+MODELLING = ROOT / "docs" / "modelling.md"
+RESULTS = ROOT / "docs" / "results.md"
 README = ROOT / "README.md"
+STALE = "is stale: run `moose reproduce --write docs/modelling.md --write docs/results.md --write README.md`"
 
 
 @pytest.fixture(scope="module")
@@ -59,7 +61,7 @@ def test_other_planners_run_beside_the_papers_without_a_claim(paper_runs: RunCac
     assert added[-1].solver == "" and added[-1].summary["outcome"] == "collision"
 
 
-def block(name: str, path: Path = DESIGN) -> str:
+def block(name: str, path: Path = RESULTS) -> str:
     text = path.read_text(encoding="utf-8")
     match = re.search(rf"<!-- BEGIN {name} -->\n(.*?)<!-- END {name} -->", text, re.S)
     assert match, f"{path.name} has no generated block {name!r}"
@@ -182,38 +184,38 @@ def test_observation_2_with_and_without_the_late_fix_replay(paper_runs: RunCache
 
 
 def test_the_documented_claims_are_the_generated_ones(found: list[Claim]) -> None:
-    """docs/design.md carries what `moose reproduce --write` generates: the same claims, verdicts and numbers."""
-    assert block("claims").strip() == render_claims(found), "docs/design.md is stale: run `moose reproduce --write`"
+    """docs/results.md carries what `moose reproduce --write` generates: the same claims, verdicts and numbers."""
+    assert block("claims").strip() == render_claims(found), f"docs/results.md {STALE}"
 
 
 def test_the_documented_results_are_the_generated_ones(runs: list[Run]) -> None:
     assert block("conditions").strip() == render_conditions(runs) == (
         "Seed 0; timing `car`: sensor 10 ms, planning 20 ms, command 10 ms, delay compensation off."), \
-        "docs/design.md is stale: run `moose reproduce --write docs/design.md`"
+        f"docs/results.md {STALE}"
     documented = block("results")
     generated = render_results(runs)
     for index in (0, 1, 4):  # scenario, planner, outcome
         assert column(documented, index) == column(generated, index), \
-            "docs/design.md is stale: run `moose reproduce --write docs/design.md`"
+            f"docs/results.md {STALE}"
 
 
 def test_the_readmes_summary_is_the_generated_one(runs: list[Run], found: list[Claim]) -> None:
     assert block("summary", README).strip() == render_summary(runs, found), \
-        "README.md is stale: run `moose reproduce --write docs/design.md --write README.md`"
+        f"README.md {STALE}"
 
 
 # -- the readings the paper leaves open ---------------------------------------------------------------------------
 
 def test_the_documented_variants_are_the_generated_ones(paper_runs: RunCache) -> None:
-    """The variants table of docs/design.md, checked on two of its variants (the default, which the claims' runs
+    """The variants table of docs/modelling.md, checked on two of its variants (the default, which the claims' runs
     already hold, and the S-curve MSF): all their cells, on both roads."""
-    documented = block("variants").strip().splitlines()
+    documented = block("variants", MODELLING).strip().splitlines()
     assert [line.split(" | ")[0].strip("| ") for line in documented[2:]] == \
-        [v.label for v in VARIANTS for _ in MUS], "docs/design.md is stale: run `moose reproduce --write`"
+        [v.label for v in VARIANTS for _ in MUS], f"docs/modelling.md {STALE}"
     checked = [v for v in VARIANTS if v.label in ("default", "S-curve MSF")]
     generated = render_variants(variant_rows(paper_runs, checked)).splitlines()
     for line in generated[2:]:
-        assert line in documented, f"docs/design.md is stale: run `moose reproduce --write`: {line}"
+        assert line in documented, f"docs/modelling.md {STALE}: {line}"
 
 
 def test_the_default_readings_keep_every_paper_case_clear_on_both_roads(paper_runs: RunCache) -> None:

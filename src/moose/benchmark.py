@@ -31,7 +31,7 @@ from .schema import PLANNER_MODES
 
 AXES: dict[str, str] = {"speed": "4:8:1", "tau": "1:5:0.5", "nu": "0.1:1.0:0.1", "mu": "paper,0.8",
                         "planner": ",".join(PLANNER_MODES)}
-"""The benchmark's sweep, as ``moose sweep`` flags (the paper region of docs/design.md, every planner)."""
+"""The benchmark's sweep, as ``moose sweep`` flags (the paper region of docs/maps.md, every planner)."""
 
 HEADER = ("μ", "planner", "envelope (%)", "clear (%)", "no collision (%)", "mean clearance (m)",
           "worst sideslip (rad)", "steering effort (rad)", "cells")

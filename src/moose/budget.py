@@ -8,8 +8,8 @@ with ``timing.compensate``.  The budget of a (case, path, compensation) is the l
 every point from 0 to L has the reference outcome, the case's with no added latency and no compensation (so
 compensation is held to the outcome of the uncompensated chain; "–" when compensation alone changes it).  A series
 that keeps it over the whole range has a budget of at least the range (``≥``).  :func:`render_table` writes the
-table docs/design.md carries, :func:`render_summary` the README's line, :func:`plot_budget` the figure of clearance
-against added latency.
+table docs/architecture.md carries, :func:`render_summary` the README's line, :func:`plot_budget` the figure of
+clearance against added latency.
 """
 from __future__ import annotations
 

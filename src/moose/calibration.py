@@ -51,7 +51,7 @@ def calibration_errors(vehicle: VehicleParams, mu: float, dt: float = 1e-3) -> C
 def calibrate(vehicle: VehicleParams, bounds: tuple[float, float] = (0.2, 0.6), tol: float = 1e-3) -> CalibrationErrors:
     """The μ in ``bounds`` with the least RMS error of ν over the nine experiments: a golden-section search down
     to ``tol`` (the error is unimodal in μ over the bounds: y_max grows with μ, so ν falls; see the calibration
-    table in docs/design.md)."""
+    table in docs/modelling.md, "Friction")."""
     ratio = (math.sqrt(5.0) - 1.0) / 2.0
     lo, hi = bounds
 

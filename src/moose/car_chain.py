@@ -1,5 +1,5 @@
 """The FPEV2-Kanon's latency chain, read from config/kanon.dbc: the CAN hops of its sensor and command frames and the
-planning computer's solve time (docs/design.md, "Closed loop and rates").
+planning computer's solve time (docs/architecture.md, "Closed loop and rates").
 
 The ``car`` timing profile (:func:`moose.timing.profile`) and the defaults of :class:`moose.schema.TimingParams` are
 these numbers.  The module is light on purpose (no schema, no CasADi; the DBC's parser only when the hops are not in
@@ -127,7 +127,7 @@ def hops_cache_path() -> Path:
 
 def car_hops() -> tuple[Hop, Hop]:
     """:func:`dbc_hops`, from the disk cache when it holds them: a node process that only needs the delays of the
-    ``car`` profile then loads neither cantools nor python-can (about 6 MB of each process's memory; docs/design.md,
+    ``car`` profile then loads neither cantools nor python-can (about 6 MB of each process's memory; docs/graph.md,
     "Processes").  The cached numbers are the parsed ones bit for bit (JSON keeps a float's every digit); an
     unreadable or malformed entry is read from the DBC again and replaced, written whole (a temporary file renamed)."""
     path = hops_cache_path()

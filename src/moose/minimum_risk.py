@@ -26,7 +26,7 @@ Per command period T (one call of :meth:`MinimumRiskManeuver.step`), from the pr
 Every output then goes through the vehicle's limits (:meth:`ActuatorLimits.limit`): |δ| ≤ δ_max,
 |Δδ| ≤ δ̇_max T, |δ̇_cmd| ≤ δ̇_max and no rate towards an end stop the measured angle has reached,
 |T| ≤ T_max and |ΔT| ≤ Ṫ_max T.  The car stops along its heading, not back in its lane (nothing at
-this level knows a lane): docs/design.md, "Minimum-risk maneuver", has the measured distances.
+this level knows a lane): docs/graph.md, "Minimum-risk maneuver", has the measured distances.
 """
 from __future__ import annotations
 

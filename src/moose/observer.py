@@ -30,7 +30,7 @@ record, non-finite fields, older than the last sample, a GPS fix measured after
 its delivery) raise before they touch the filter, which stays as it was.
 
 The lateral model's cornering stiffness is μ F_z B_y C_y, so a wrong model μ
-biases v_y and β (measured in docs/design.md).  With ``estimate_mu`` the state
+biases v_y and β (measured in docs/modelling.md).  With ``estimate_mu`` the state
 is augmented with μ as a random walk, observable through a_y, γ and the GPS
 velocity whenever the tyres carry lateral force, and kept in [mu_min, mu_max].
 """

@@ -7,7 +7,7 @@ paper defaults).  Values come from a ROS 2 parameter YAML file
 with a :class:`ParamError` naming the field and the value.
 
 :class:`VehicleParams` holds Table I of the paper plus the few plant
-quantities the paper does not give (documented in ``docs/design.md``).
+quantities the paper does not give (documented in ``docs/modelling.md``).
 """
 from __future__ import annotations
 
@@ -66,7 +66,7 @@ class VehicleLimits:
     """Steering rate of the road wheels (rad/s).  Table I prints 2618 rad/s, which is
     25 000 rpm: the speed of the EPS's Maxon motor, not of the road wheels.  1 rad/s (full lock
     0.3 rad in 0.3 s, about a skilled driver's emergency steering input) is our choice for the
-    road wheels; docs/design.md, "Steering rate"."""
+    road wheels; docs/modelling.md, "Steering rate"."""
     T_max: float = 200.0
     """Torque of one rear in-wheel motor (N m), Table I."""
     torque_rate_max: float = 2000.0
@@ -85,7 +85,7 @@ VEHICLE_LIMITS = VehicleLimits()
 class VehicleParams:
     """FPEV2-Kanon single-track parameters: Table I of the paper (SI units).
 
-    ``track``, ``length``, ``width``, ``v_low`` and ``mu`` are not in Table I; see docs/design.md.
+    ``track``, ``length``, ``width``, ``v_low`` and ``mu`` are not in Table I; see docs/modelling.md.
     """
 
     m: float = 925.0
@@ -118,14 +118,14 @@ class VehicleParams:
     """Lateral Pacejka stiffness factor."""
     mu: float = 0.8
     """Tyre-road friction of the road the plant drives on (dry asphalt: 0.8–1.0).  A scenario may set its
-    own (the paper's cases run at the calibrated friction, docs/design.md, "Friction"); the stack
+    own (the paper's cases run at the calibrated friction, docs/modelling.md, "Friction"); the stack
     assumes the same μ unless ``planning.mu_estimate`` says otherwise."""
     track: float = 1.3
     """Rear track width (m); not in Table I."""
     length: float = 2.5
     """Overall length of the body (m); not in Table I.  Our estimate: Table I's wheelbase l_f + l_r = 1.70 m
     with 0.4 m overhangs front and rear, those of a production car of that wheelbase and mass (a 925 kg
-    two-seater); the footprint of the CommonRoad export and the independent verdict (docs/design.md,
+    two-seater); the footprint of the CommonRoad export and the independent verdict (docs/commonroad.md,
     "CommonRoad"), not used by the dynamics."""
     width: float = 1.5
     """Overall width of the body (m); not in Table I.  Our estimate: the track plus a tyre's width and the

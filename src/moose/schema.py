@@ -77,7 +77,7 @@ class PlanningGrid:
     """The planning μ (ε of eq. (ysafe))."""
 
 SolverName = Literal["projected_newton", "sqp_lbfgs", "sqp_exact", "ipopt", "paper_sqp"]
-"""The MPC's solver (:mod:`moose.planner.mpc.solver`; docs/design.md, "MPC"): ``projected_newton``: exact
+"""The MPC's solver (:mod:`moose.planner.mpc.solver`; docs/modelling.md, "MPC"): ``projected_newton``: exact
 Hessian, compiled C (the default); ``sqp_lbfgs``: CasADi's sqpmethod with a BFGS Hessian;
 ``sqp_exact``: sqpmethod with the exact Hessian, regularised to be positive definite; ``ipopt``:
 interior point (a reference); ``paper_sqp``: the paper's baseline, fmincon's SQP algorithm with
@@ -156,7 +156,7 @@ class MpcParams:
     time_budget_s: float = 0.2
     """Wall-clock budget of one plan (s), one planning period; above it the status is ``over_budget``."""
     solver: SolverName = "projected_newton"
-    """NLP solver (docs/design.md, "MPC": chosen by bench/bench_mpc.py)."""
+    """NLP solver (docs/modelling.md, "MPC": chosen by bench/bench_mpc.py)."""
     qpsol: QpSolverName = "qrqp"
     """QP solver of ``sqpmethod``."""
     speed_floor: SpeedFloor = "penalty"
@@ -195,7 +195,7 @@ class MpcParams:
 
 
 MsfProfile = Literal["scurve", "nu_scaled"]
-"""The MSF planner's evasion reference (docs/design.md, "MSF planner"): ``scurve``, the maximum steering maneuver
+"""The MSF planner's evasion reference (docs/modelling.md, "MSF planner"): ``scurve``, the maximum steering maneuver
 scaled to arrive at w + m by the near edge, then mirrored (the counter-steer before the obstacle); ``nu_scaled``,
 ν y_max(t) with ν of the target w + m (eq. (nudef)), arriving there at τ, the counter-steer from the near edge on."""
 MSF_PROFILES: tuple[MsfProfile, ...] = get_args(MsfProfile)
@@ -230,7 +230,7 @@ class MsfParams:
 
 
 RhoReading = Literal["fbl", "kinematic"]
-"""How the weight function reads the steering the MPC's first acceleration needs (ρ, docs/design.md, "Weight
+"""How the weight function reads the steering the MPC's first acceleration needs (ρ, docs/modelling.md, "Weight
 function"): ``fbl``, the FBL's δ* at the current estimate (the front axle alone carries the lateral force until
 yaw builds); ``kinematic``, L a_⊥ / v², the steering of a car already turning (as for the later steps)."""
 RHO_READINGS: tuple[RhoReading, ...] = get_args(RhoReading)
@@ -415,7 +415,7 @@ class MinimumRiskBounds:
 
     A parameter file may choose a value within them, never outside: outside, the fallback would be disarmed
     (no braking, no steering back, a "stop" declared at speed) or would ask more than the 10 ms command loop
-    (config/kanon.dbc's command cycle T) can follow.  docs/design.md, "Command guard", derives each bound from
+    (config/kanon.dbc's command cycle T) can follow.  docs/vehicle-bus.md, "Command guard", derives each bound from
     Table I (m = 925 kg, r = 0.301 m, J_wr = 1.24 kg m², T_max = 200 N m) and measures its effect."""
 
     brake_fraction: tuple[float, float] = (0.8, 1.0)
@@ -583,12 +583,12 @@ def _car(name: str) -> float:
 @dataclasses.dataclass(frozen=True)
 class TimingParams:
     """The car's latency chain (s): what the lockstep loop and the node graph delay, and whether the stack
-    compensates it (:mod:`moose.timing`; docs/design.md, "Closed loop and rates").
+    compensates it (:mod:`moose.timing`; docs/architecture.md, "Closed loop and rates").
 
     Each delay is a whole number of motion-control periods (checked by :class:`Config`).  The defaults are the
     ``car`` profile (:func:`moose.timing.profile`): the FPEV2-Kanon's chain, from the CAN periods of
-    config/kanon.dbc and the planning computer's solve time (docs/design.md: why ``car``); ``ideal`` is all
-    zero."""
+    config/kanon.dbc and the planning computer's solve time (docs/architecture.md, "Closed loop and rates": why
+    ``car``); ``ideal`` is all zero."""
 
     sensor_delay_s: float = dataclasses.field(default_factory=lambda: _car("sensor_delay_s"))
     """d_s: a sample handed over by the sensors at t reaches the observer at t + d_s (stamped t)."""

@@ -1,5 +1,5 @@
 """The car's timing: its latency chain as named profiles, the delay mechanics that the lockstep loop and the node
-graph share, the compute-time budget, and delay compensation (docs/design.md, "Closed loop and rates").
+graph share, the compute-time budget, and delay compensation (docs/architecture.md, "Closed loop and rates").
 
 The semantics, one place for :mod:`moose.simulation` and the node graph (``timing`` of the configuration,
 :class:`moose.schema.TimingParams`, every value a whole number of motion-control periods):

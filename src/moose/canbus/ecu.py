@@ -15,7 +15,7 @@ Its command timeout has two levels:
    itself, from its own measurements (the EPS angle, the rear wheel speeds it sends): steer
    back to straight, brake with the rear motors, hold still.  Fresh commands on both streams
    end it.  Without level 2 a car whose bridge dies coasts on an arc at the held steering
-   angle; docs/design.md ("Fault matrix") states level 2 as a requirement on the car's ECUs.
+   angle; docs/graph.md ("Fault matrix") states level 2 as a requirement on the car's ECUs.
 """
 from __future__ import annotations
 

@@ -3,8 +3,9 @@
 
 Runs the benchmark's sweep (``moose sweep`` with the axes of :data:`moose.benchmark.AXES`; ``--resume`` continues
 it, or only redraws a complete one), then writes DIR/leaderboard.md and DIR/leaderboard.png; ``--figure PNG``
-writes the figure there too and ``--write FILE`` regenerates the ``leaderboard`` block of FILE (README.md).  Exit
-status: the sweep's (0, 3 when a case did not finish, 130 interrupted: then no leaderboard), 2 for bad input.
+writes the figure there too and ``--write FILE`` regenerates the ``leaderboard`` block of FILE
+(docs/benchmarks.md).  Exit status: the sweep's (0, 3 when a case did not finish, 130 interrupted: then no
+leaderboard), 2 for bad input.
 """
 from __future__ import annotations
 
@@ -15,8 +16,8 @@ from typing import Any
 from ..params import ParamError
 from .common import positive_float
 
-COMMAND = "moose benchmark -o runs/benchmark --write README.md --figure docs/maps/leaderboard.png"
-"""The command that generates README.md's leaderboard and its figure."""
+COMMAND = "moose benchmark -o runs/benchmark --write docs/benchmarks.md --figure docs/maps/leaderboard.png"
+"""The command that generates docs/benchmarks.md's leaderboard and its figure."""
 
 
 def add_subparser(subparsers: Any) -> None:
@@ -25,7 +26,7 @@ def add_subparser(subparsers: Any) -> None:
         description="Run the open benchmark (a sweep of every planner over the paper region, v 4-8 m/s, tau 1-5 s, "
                     "nu 0.1-1.0, at mu 0.33 and 0.8: 4,500 cases) and write its leaderboard: safe envelope, clear "
                     "and collision-free shares, mean clearance, worst sideslip, steering effort.",
-        epilog=f"the README's leaderboard: {COMMAND}")
+        epilog=f"the leaderboard of docs/benchmarks.md: {COMMAND}")
     parser.add_argument("-o", "--output", default="runs/benchmark", help="the sweep's folder (default runs/benchmark)")
     parser.add_argument("--resume", action="store_true",
                         help="continue the benchmark in -o (a complete one is only drawn again)")
@@ -34,7 +35,8 @@ def add_subparser(subparsers: Any) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("--figure", metavar="PNG", help="also write the leaderboard's figure to this path")
     parser.add_argument("--write", metavar="MARKDOWN", action="append", default=[],
-                        help="regenerate the 'leaderboard' block of this file (README.md); may be given more than once")
+                        help="regenerate the 'leaderboard' block of this file (docs/benchmarks.md); may be given more "
+                             "than once")
     parser.set_defaults(func=cmd_benchmark)
 
 

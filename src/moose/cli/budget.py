@@ -2,7 +2,7 @@
 (:mod:`moose.budget`), with and without delay compensation.
 
 Prints the table; ``--figure PNG`` draws clearance against added latency, ``--write FILE`` regenerates the generated
-blocks FILE holds (docs/design.md: ``budget``; README.md: ``budget-summary``), ``--json`` writes every point.
+blocks FILE holds (docs/architecture.md: ``budget``; README.md: ``budget-summary``), ``--json`` writes every point.
 """
 from __future__ import annotations
 
@@ -34,8 +34,8 @@ def add_subparser(subparsers: Any) -> None:
     parser.add_argument("--workers", type=int, help="worker processes (default: the number of cores)")
     parser.add_argument("--figure", help="write the figure (PNG) to this path")
     parser.add_argument("--write", metavar="MARKDOWN", action="append",
-                        help="regenerate the generated blocks this file holds (budget: docs/design.md; budget-summary: "
-                             "README.md); may be given more than once")
+                        help="regenerate the generated blocks this file holds (budget: docs/architecture.md; "
+                             "budget-summary: README.md); may be given more than once")
     parser.add_argument("--json", help="write every point as JSON to this path")
     parser.set_defaults(func=cmd_budget)
 

@@ -190,7 +190,8 @@ def add_timing_argument(parser: Any) -> None:
     """``--timing PROFILE``: the latency chain of ``simulate``, ``sweep`` and ``reproduce``."""
     parser.add_argument("--timing", choices=PROFILES,
                         help="the latency chain: ideal (none) or car (the FPEV2-Kanon's, from config/kanon.dbc); "
-                             "replaces the configuration's timing delays (docs/design.md, 'Closed loop and rates'); "
+                             "replaces the configuration's timing delays (docs/architecture.md, "
+                             "'Closed loop and rates'); "
                              "--set timing.KEY=VALUE changes one of them after it")
 
 

@@ -1,8 +1,8 @@
 """``moose reproduce``: re-run the paper's cases with every planner and judge its claims (:mod:`moose.reproduce`).
 
 Prints the claims table (``--variants``: also the table of the readings the paper leaves open); ``--write FILE``
-regenerates the generated blocks FILE holds (docs/design.md: the calibration, the results, the claims and the
-variants; README.md: the summary), ``--json`` writes the summary of every run made.
+regenerates the generated blocks FILE holds (docs/modelling.md: the calibration and the variants; docs/results.md:
+the conditions, the results and the claims; README.md: the summary), ``--json`` writes the summary of every run made.
 """
 from __future__ import annotations
 
@@ -24,7 +24,8 @@ def add_subparser(subparsers: Any) -> None:
                         help="also run and print the readings the paper leaves open, side by side (nine cases each)")
     parser.add_argument("--write", metavar="MARKDOWN", action="append",
                         help="regenerate the generated blocks this file holds (calibration, conditions, results, "
-                             "claims, variants, summary: docs/design.md, README.md); may be given more than once")
+                             "claims, variants, summary: docs/modelling.md, docs/results.md, README.md); may be "
+                             "given more than once")
     parser.add_argument("--json", help="write the summary of every run made as JSON to this path")
     parser.add_argument("--planner", metavar="P[,P...]", type=planner_list,
                         help="also run these planners (e.g. the baselines aeb,max_steer): rows of the results and of "

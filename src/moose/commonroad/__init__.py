@@ -14,7 +14,7 @@ The packages are the optional extra ``commonroad`` (``pip install 'moose-avoidan
 installs it).  This module and :mod:`.geometry` import none of them; the others do, and are imported only
 after :func:`require` (or :func:`available`) said they are there.
 
-Identifiers of what a moose file holds (docs/design.md, "CommonRoad"): the lanelets 1, 2, …; the obstacle
+Identifiers of what a moose file holds (docs/commonroad.md, "CommonRoad"): the lanelets 1, 2, …; the obstacle
 :data:`OBSTACLE_ID`; the ego's driven path :data:`EGO_ID` (a dynamic obstacle of type ``car``); its
 planning problem :data:`PLANNING_PROBLEM_ID`.
 """

@@ -1,4 +1,4 @@
-"""Baselines: the simple strategies any evasion planner must beat (docs/design.md, "Baselines").
+"""Baselines: the simple strategies any evasion planner must beat (docs/modelling.md, "Baselines").
 
 Both run in the feed-forward planner's slot of Fig. 3 (the MSF planner's: the ``msf_planner`` node of the
 graph, :attr:`moose.planner.step.PlanningStep.msf` in lockstep) and drive the car alone, through the

@@ -3,7 +3,7 @@
 
 The discretisation is the exact zero-order hold, p⁺ = p + t_s v + t_s²/2 a, v⁺ = v + t_s a (exact
 for a double integrator; forward Euler would give y(k+1) = y(k) whatever the input, so the first
-predicted step could not react; docs/design.md, "MPC").  It is written once, here: the MPC's cost
+predicted step could not react; docs/modelling.md, "MPC").  It is written once, here: the MPC's cost
 (:mod:`moose.planner.mpc.cost`) predicts with :func:`kinematic_step`, and the MPC's and MSF's
 ``PlanResult.predicted`` and the blended path (:func:`moose.planner.step.blend_path`) are
 :func:`kinematic_rollout`.  Light (NumPy only): the ``weight_fbl`` node uses it.

@@ -3,7 +3,8 @@
 * :mod:`moose.reproduce.runs` — the paper's cases, the roads and the :class:`RunCache` that makes each run once;
 * :mod:`moose.reproduce.claims` — every claim of the paper, quoted, held to a criterion on each road;
 * :mod:`moose.reproduce.variants` — the readings the paper leaves open, measured side by side;
-* :mod:`moose.reproduce.render` — the generated tables of docs/design.md and the README's summary.
+* :mod:`moose.reproduce.render` — the generated tables of docs/results.md and docs/modelling.md and the README's
+  summary.
 
 Every scenario runs with the combined planner (with the configured MPC solver and with the paper's fmincon
 baseline ``paper_sqp``), the MSF planner alone and the MPC alone (both solvers), at the calibrated friction and

@@ -6,7 +6,7 @@ construction`` (our design makes it hold whatever the runs do) — and a :class:
 numbers it rests on.  The runs come from a :class:`~moose.reproduce.runs.RunCache`, so the claims share them
 with one another and with the tables.
 
-Readings (docs/design.md, "The paper's claims"): "steering command" is the FBL's δ* (the paper's δ),
+Readings (docs/results.md, "The paper's claims"): "steering command" is the FBL's δ* (the paper's δ),
 "δ_MPC" the δ* for the MPC's own first acceleration in the same run (Figs. 7–9 plot both); "close to the
 limits" is within 5 % of δ_max (:data:`~moose.reproduce.runs.LOCK`).
 """

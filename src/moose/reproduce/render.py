@@ -1,10 +1,11 @@
-"""The generated tables of docs/design.md and the README's summary, and the blocks that hold them.
+"""The generated tables of docs/results.md and docs/modelling.md and the README's summary, and the blocks that hold
+them.
 
 :func:`render_conditions`, :func:`render_results`, :func:`render_summary` and :func:`render_calibration` write
-what docs/design.md and
-README.md carry between ``<!-- BEGIN name -->`` / ``<!-- END name -->`` markers (:func:`update_document`); the
-claims and the variants tables are :func:`moose.reproduce.claims.render_claims` and
-:func:`moose.reproduce.variants.render_variants`.  They are generated, never edited by hand.
+what docs/results.md, docs/modelling.md and README.md carry between ``<!-- BEGIN name -->`` / ``<!-- END name -->``
+markers (:func:`update_document`); the claims and the variants tables are
+:func:`moose.reproduce.claims.render_claims` and :func:`moose.reproduce.variants.render_variants`.  They are
+generated, never edited by hand.
 """
 from __future__ import annotations
 

@@ -5,7 +5,7 @@ A :class:`Variant` is a set of parameter settings that read the paper another wa
 (``weight.nu_reading``), the factor of a plan through y_safe (``weight.barrier_violated_factor``) and the
 barrier's shape (``mpc.barrier``).  Each runs the combined planner over the nine paper cases on every road of
 :data:`~moose.reproduce.runs.MUS`; :func:`render_variants` writes one row per variant and road, which
-docs/design.md carries ("The readings the paper leaves open"), and the defaults are chosen from it.
+docs/modelling.md carries ("The readings the paper leaves open"), and the defaults are chosen from it.
 """
 from __future__ import annotations
 

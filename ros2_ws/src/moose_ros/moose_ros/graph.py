@@ -2,7 +2,7 @@
 
 One definition of each fact of the node graph (paper Fig. 3). Nodes publish and subscribe through
 :meth:`Topic.publisher` and :meth:`Topic.subscription`; the launcher, the bag recorder and player,
-the ROS 2 launch files, ``setup.py``'s entry points and the topic table of docs/design.md are taken
+the ROS 2 launch files, ``setup.py``'s entry points and the topic table of docs/graph.md are taken
 from here or checked against it by ``tests/test_graph_contract.py``.
 
 This module is light on purpose (no middleware, no planner): every node, the launcher and the
@@ -280,7 +280,7 @@ def subscribes(node: str) -> list[Topic]:
 
 
 def topic_table() -> str:
-    """The Markdown topic table of docs/design.md, "Node graph"."""
+    """The Markdown topic table of docs/graph.md, "Node graph"."""
 
     def qos(q: Qos) -> str:
         parts = ["reliable" if q.reliable else "best effort"] + (["transient local"] if q.transient_local else [])

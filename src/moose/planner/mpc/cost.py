@@ -7,7 +7,7 @@ problem is built once per parameter set (:func:`build_problem`) and is parametri
 v_des, the obstacle's extent, w, the evasion side, the ego path, ε (i.e. μ) and the input bounds
 (:data:`PARAMETERS`).
 
-Choices where the paper is silent or inconsistent (docs/design.md, "MPC"):
+Choices where the paper is silent or inconsistent (docs/modelling.md, "MPC"):
 
 * eq. (skin) is discretised with the exact zero-order hold of :mod:`moose.planner.kinematics`
   (forward Euler would give y(k+1) = y(k) whatever the input: the first predicted step could

@@ -4,7 +4,7 @@ The paper solves eq. (planmpc) with ``fmincon``'s SQP algorithm (MATLAB R2017b) 
 Table II: 10 iterations, 100 function evaluations, tolerances 1e-3.  The cost is given without
 its gradient, so fmincon estimates it by finite differences, and every one of those evaluations
 counts against the 100.  :func:`fmincon_sqp` does what the MATLAB documentation describes for
-that algorithm on a bound-constrained problem (docs/design.md, "MPC", says what is the same and
+that algorithm on a bound-constrained problem (docs/modelling.md, "MPC", says what is the same and
 what differs):
 
 * the start is moved into the bounds; f(x₀) is one evaluation;
