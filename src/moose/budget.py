@@ -163,9 +163,9 @@ def render_summary(found: Sequence[Budget], points: Sequence[Point], config: Con
         return f"{_ms(b)} ms" + (f" (then {b.first_change})" if b.first_change else "")
 
     return (f"- Latency budget of the extreme case ({case}, combined planner, seed 0) on top of the `{t['profile']}` "
-            f"timing ({chain:.0f} ms from a sample to the actuators through a plan; {base.outcome}, clearance "
-            f"{clearance}), in steps of {step_s * 1e3:.0f} ms: **{budget('command', False)}** on the command path, "
-            f"**{budget('planning', False)}** on the planning path; with compensation {budget('command', True)} and "
+            f"timing\n  ({chain:.0f} ms from a sample to the actuators through a plan; {base.outcome}, clearance "
+            f"{clearance}), in steps of {step_s * 1e3:.0f} ms:\n  **{budget('command', False)}** on the command path, "
+            f"**{budget('planning', False)}** on the planning path;\n  with compensation {budget('command', True)} and "
             f"{budget('planning', True)}.")
 
 

@@ -88,7 +88,7 @@ def render_summary(runs: Sequence[Run], found: Sequence[Claim]) -> str:
         lines.append(f"- Extreme case ({EXTREME}: τ = {c['tau_s']:.2f} s, ν = {c['nu']:.2f} here, "
                      f"{c['paper_nu']:.2f} in the paper), combined: {c['outcome']}, clearance "
                      f"{_fmt(c['min_clearance_m'])} m, max abs δ {c['max_abs_steer_rad']:.2f} rad, max abs β "
-                     f"{c['max_abs_sideslip_rad']:.2f} rad, mean w_MPC {_fmt(c['mean_weight_mpc'])}; the MPC alone: "
+                     f"{c['max_abs_sideslip_rad']:.2f} rad, mean w_MPC {_fmt(c['mean_weight_mpc'])};\n  the MPC alone: "
                      f"{alone}.")
     relaxed = [r for r in runs if r.planner == "combined" and r.solver == runs[0].solver
                and r.scenario in RELAXED_5 + SIX]
@@ -102,7 +102,7 @@ def render_summary(runs: Sequence[Run], found: Sequence[Claim]) -> str:
     for mu in (mu for mu, _ in found[0].verdicts) if found else ():
         held = sum(c.verdict(mu).holds for c in found)
         lines.append(f"- The paper's claims at μ = {mu:g}: {held} of {len(found)} hold, {len(found) - held} are "
-                     "contradicted (docs/design.md, \"The paper's claims\").")
+                     "contradicted ([docs/results.md](docs/results.md#the-papers-claims-generated)).")
     return "\n".join(lines)
 
 
