@@ -30,6 +30,7 @@ from moose_ros.faults import (
     reported,
     run_case,
     weakest_parameters,
+    write_matrix,
 )
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -128,3 +129,22 @@ def test_the_reported_check_can_fail() -> None:
     assert not reported(fault, quiet)
     assert not reported(fault, {"incidents": [{"node": "weight_fbl", "kind": "minimum_risk"}]})  # not its detector
     assert reported(fault, {"incidents": [*quiet["incidents"], {"node": "motion_controller", "kind": "minimum_risk"}]})
+
+
+@pytest.mark.parametrize("weakest", [False, True], ids=["matrix", "weakest"])
+def test_the_generator_finds_its_markers_on_its_page_and_writes_it_back(tmp_path: Path, weakest: bool) -> None:
+    """``python -m moose_ros.faults [--weakest] --write PAGE`` on the page its marker names: given the table the page
+    holds, the generator writes the page back byte for byte (the marker lookup and the note around the table)."""
+    begin, end = (WEAKEST_BEGIN, WEAKEST_END) if weakest else (MATRIX_BEGIN, MATRIX_END)
+    match = re.search(r"--write (\S+)`", begin)
+    assert match
+    page = ROOT / match.group(1)
+    text = page.read_text(encoding="utf-8")
+    body = text.split(begin, 1)[1].split(end, 1)[0]
+    rate = re.search(r"--rate ([\d.]+)", body)
+    assert rate
+    copy = tmp_path / page.name
+    copy.write_text(text, encoding="utf-8")
+    write_matrix(str(copy), "\n".join(line for line in body.splitlines() if line.startswith("|")), float(rate.group(1)),
+                 weakest)
+    assert copy.read_text(encoding="utf-8") == text
