@@ -21,7 +21,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 REPORTS = ROOT / "runs" / "tests"
-DOCS = ROOT / "docs" / "design.md"
+DOCS = ROOT / "docs" / "testing.md"
 BLOCK = "test-durations"
 
 

@@ -4,8 +4,11 @@ file points to a file of the repository (and to a heading of it, where it names 
 from the README, the README stays short, and every generator writes to the page that holds its blocks."""
 from __future__ import annotations
 
+import importlib.util
 import re
+import sys
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 
@@ -177,20 +180,29 @@ def test_every_generator_command_in_the_docs_writes_to_pages_that_hold_its_block
     assert written == every, f"blocks no documented command writes: {sorted(every - written)}"
 
 
-def test_the_fault_matrix_and_the_mutation_table_are_where_their_generators_write() -> None:
-    """``python -m moose_ros.faults --write PAGE`` names its page in its markers; ``bench/mutation.py --docs`` writes
-    the page its ``DOCS`` names: each page holds those markers, and no other page does."""
-    import importlib.util
+def bench_script(name: str) -> ModuleType:
+    """A script of bench/ as a module (registered, so that its dataclasses resolve their annotations)."""
+    spec = importlib.util.spec_from_file_location(f"bench_{name}", ROOT / "bench" / f"{name}.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
 
+
+def test_the_fault_matrix_and_the_bench_tables_are_where_their_generators_write() -> None:
+    """``python -m moose_ros.faults --write PAGE`` names its page in its markers; ``bench/mutation.py --docs`` and
+    ``bench/test_durations.py --docs`` write the page their ``DOCS`` names: each page holds those markers, and no other
+    page does."""
     from moose_ros.faults import MATRIX_BEGIN, MATRIX_END, WEAKEST_BEGIN, WEAKEST_END
 
-    spec = importlib.util.spec_from_file_location("mutation", ROOT / "bench" / "mutation.py")
-    assert spec is not None and spec.loader is not None
-    mutation = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mutation)
-    for begin, end, page in [(MATRIX_BEGIN, MATRIX_END, re.search(r"--write (\S+)`", MATRIX_BEGIN).group(1)),
-                             (WEAKEST_BEGIN, WEAKEST_END, re.search(r"--write (\S+)`", WEAKEST_BEGIN).group(1)),
-                             (mutation.BEGIN, mutation.END, str(mutation.DOCS.relative_to(ROOT)))]:
+    mutation, durations = bench_script("mutation"), bench_script("test_durations")
+    written = [(MATRIX_BEGIN, MATRIX_END, re.search(r"--write (\S+)`", MATRIX_BEGIN).group(1)),
+               (WEAKEST_BEGIN, WEAKEST_END, re.search(r"--write (\S+)`", WEAKEST_BEGIN).group(1)),
+               (mutation.BEGIN, mutation.END, str(mutation.DOCS.relative_to(ROOT))),
+               (f"<!-- BEGIN {durations.BLOCK} -->", f"<!-- END {durations.BLOCK} -->",
+                str(durations.DOCS.relative_to(ROOT)))]
+    for begin, end, page in written:
         holding = [str(p.relative_to(ROOT)) for p in markdown_files() if begin in p.read_text(encoding="utf-8")]
         assert holding == [page], f"{begin}: on {holding}, written to {page}"
         assert end in (ROOT / page).read_text(encoding="utf-8")
