@@ -146,13 +146,13 @@ def commands_writing_markdown() -> list[tuple[str, str, list[str]]]:
     sources = [(str(p.relative_to(ROOT)), p.read_text(encoding="utf-8")) for p in markdown_files()]
     sources.append(("moose.cli.benchmark.COMMAND", COMMAND))
     found = []
-    pattern = re.compile(r"(moose (?:reproduce|budget|benchmark)|moose_ros\.faults|bench/mutation\.py)"
+    pattern = re.compile(r"(moose\s+(?:reproduce|budget|benchmark)|moose_ros\.faults|bench/bench_realtime\.py)"
                          r"((?:\s+(?:--[\w-]+|[\w./-]+))*)")
     for where, text in sources:
         for m in pattern.finditer(text):
-            writes = re.findall(r"--write\s+(\S+)", m.group(2))
+            writes = re.findall(r"--write\s+([\w./-]+)", m.group(2))
             if writes:
-                found.append((where, m.group(1), writes))
+                found.append((where, re.sub(r"\s+", " ", m.group(1)), writes))
     return found
 
 
@@ -163,7 +163,8 @@ def test_every_generator_command_in_the_docs_writes_to_pages_that_hold_its_block
     from moose.cli.reproduce import GENERATED as REPRODUCE
     from moose.reproduce import blocks_in
 
-    blocks = {"moose reproduce": REPRODUCE, "moose budget": BUDGET, "moose benchmark": ("leaderboard",)}
+    blocks = {"moose reproduce": REPRODUCE, "moose budget": BUDGET, "moose benchmark": ("leaderboard",),
+              "bench/bench_realtime.py": ("realtime",)}
     commands = commands_writing_markdown()
     assert {generator for _, generator, _ in commands} >= {"moose reproduce", "moose budget", "moose benchmark",
                                                            "moose_ros.faults"}
@@ -176,7 +177,9 @@ def test_every_generator_command_in_the_docs_writes_to_pages_that_hold_its_block
                 held = blocks_in(path, blocks[generator])
                 assert held, f"{where}: {generator} --write {name}: it holds none of {blocks[generator]}"
                 written |= set(held)
-    every = set(REPRODUCE) | set(BUDGET) | {"leaderboard"}
+    every = {name for names in blocks.values() for name in names
+             if any(f"<!-- BEGIN {name} -->" in p.read_text(encoding="utf-8") for p in markdown_files())}
+    assert every >= set(REPRODUCE) | set(BUDGET) | {"leaderboard"}
     assert written == every, f"blocks no documented command writes: {sorted(every - written)}"
 
 
