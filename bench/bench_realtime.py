@@ -15,9 +15,9 @@ Reported per configuration: the outcome distribution, the spread of the minimum 
 over every tick of every run, and the lockstep prediction at that latency: ``moose simulate`` with the same timing
 and the command path's delay raised by 0, 10 and 20 ms (the grid of ``moose budget``; the extreme case's budget is
 0 ms, docs/architecture.md "Latency budget").  Written: ``bench/results/realtime.json`` (``--out``) and, with
-``--write docs/design.md``, the generated table between ``<!-- BEGIN realtime -->`` and ``<!-- END realtime -->``.
+``--write docs/graph.md``, the generated table between ``<!-- BEGIN realtime -->`` and ``<!-- END realtime -->``.
 Every process is on loopback, in a DDS domain claimed with ``tests/isolation.py``.  About 30 min on 2 cores.
-Run: ``python bench/bench_realtime.py [--runs 20] [--load 2] [--write docs/design.md]``.
+Run: ``python bench/bench_realtime.py [--runs 20] [--load 2] [--write docs/graph.md]``.
 """
 from __future__ import annotations
 
@@ -118,12 +118,12 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def table(results: dict[str, Any]) -> str:
-    """The generated Markdown table of docs/design.md."""
+    """The generated Markdown table of docs/graph.md."""
     meta = results["machine"]
     lines = [f"{results['runs']} real-time runs of {SCENARIO} per row, `car` timing, {meta['load']} busy processes "
              f"started by the benchmark on {meta['cores']} cores (load average {meta['loadavg_start']:.1f} at the "
              f"start, {meta['loadavg_end']:.1f} at the end); `python bench/bench_realtime.py --write "
-             "docs/design.md`. Latency: IMU sample → the actuator command of its tick, over every tick of every "
+             "docs/graph.md`. Latency: IMU sample → the actuator command of its tick, over every tick of every "
              "run. Lockstep: `moose simulate` with the command path's delay raised by 0 / 10 / 20 ms.", "",
              *([f"Load: {meta['note']}.", ""] if meta.get("note") else []),
              *([f"Rows of {', '.join(results['kept']['runtimes'])} from an earlier run (load average "
@@ -169,7 +169,7 @@ def main() -> None:
     parser.add_argument("--load", type=int, default=2, help="busy processes started meanwhile (default 2)")
     parser.add_argument("--runtimes", nargs="+", default=["dds", "rclpy"], choices=["dds", "rclpy"])
     parser.add_argument("--out", default=str(REPO / "bench" / "results" / "realtime.json"))
-    parser.add_argument("--write", help="regenerate the table in this Markdown file (docs/design.md)")
+    parser.add_argument("--write", help="regenerate the table in this Markdown file (docs/graph.md)")
     parser.add_argument("--from-json", help="regenerate the table from this result file, without running")
     parser.add_argument("--keep", help="an earlier result file whose rows of the runtimes not measured now are kept")
     parser.add_argument("--measure", nargs=2, metavar=("RUNS", "COMPENSATE"), help=argparse.SUPPRESS)

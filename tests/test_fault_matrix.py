@@ -7,7 +7,7 @@ is an incomplete run.
 
 The kills run in lockstep (faults at simulated time; what happens does not depend on the machine's load), the
 stalls at ``MOOSE_FAULT_RATE`` (default 1; see :data:`LOCKSTEP`).
-docs/design.md carries the matrix this code generates (``python -m moose_ros.faults --write docs/design.md``)."""
+docs/graph.md carries the matrix this code generates (``python -m moose_ros.faults --write docs/graph.md``)."""
 from __future__ import annotations
 
 import os
@@ -110,7 +110,7 @@ def test_the_weakest_accepted_maneuver_still_stops_the_car(graph: str, fault: Fa
 
 
 def test_docs_carry_the_generated_matrix() -> None:
-    design = (ROOT / "docs" / "design.md").read_text(encoding="utf-8")
+    design = (ROOT / "docs" / "graph.md").read_text(encoding="utf-8")
     assert MATRIX_BEGIN in design and MATRIX_END in design
     table = design.split(MATRIX_BEGIN, 1)[1].split(MATRIX_END, 1)[0]
     rows = re.findall(r"^\| (full|can) \| (\w+) \| (kill|stall) \|", table, re.M)
