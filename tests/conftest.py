@@ -94,8 +94,11 @@ def pytest_runtest_teardown(item: pytest.Item) -> Iterator[None]:
 
 @pytest.fixture(autouse=True)
 def realtime(request: pytest.FixtureRequest) -> Iterator[None]:
-    """A test marked ``realtime`` holds the machine's real-time slot (tests/isolation.py) while it runs."""
-    if request.node.get_closest_marker("realtime") is None:
+    """A test marked ``realtime`` holds the machine's real-time slot (tests/isolation.py) while it runs;
+    ``realtime(slot=False)``: it runs in the serial phase without it (it starts test runs whose own real-time tests
+    take the slot, one at a time)."""
+    marker = request.node.get_closest_marker("realtime")
+    if marker is None or not marker.kwargs.get("slot", True):
         yield
         return
     with realtime_slot():

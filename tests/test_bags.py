@@ -51,6 +51,7 @@ PUBLISHER = textwrap.dedent("""
 
 @pytest.mark.graph
 @pytest.mark.slow
+@pytest.mark.realtime  # the rate of a sleep-paced publisher, stamped on reception: judged against the wall clock
 def test_record_round_trip_read_back_independently(tmp_path: Path) -> None:
     node = DdsNode("bag_test_recorder")
     recorder = Recorder(node, tmp_path / "bag", ["/vehicle/odom", "/perception/state"])

@@ -173,6 +173,7 @@ CONCURRENT = ["tests/test_ros_runtime.py", "tests/test_can_udp.py",
 
 @pytest.mark.graph
 @pytest.mark.slow
+@pytest.mark.realtime(slot=False)  # its runs' real-time tests need the cores: the serial phase, not beside a worker
 def test_two_test_runs_at_once_both_pass(tmp_path: Path) -> None:
     env = {k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"}  # each run claims its own
     runs = [subprocess.Popen([sys.executable, "-m", "pytest", "-q", "-p", "no:randomly", "-p", "no:cacheprovider",
