@@ -190,7 +190,8 @@ def test_fast_dds_gets_the_loopback_profile_and_the_range_in_it(tmp_path: Path) 
     """rmw_fastrtps' LOCALHOST adds a UDP transport on every interface to any profile's: an rclpy node on Fast DDS
     asks it for SYSTEM_DEFAULT, and the profile (loopback UDP, 127.0.0.1 as the peer, no multicast) is the range."""
     env = Discovery.from_environ({}).rclpy_environment()
-    assert env == {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SYSTEM_DEFAULT", "ROS_LOCALHOST_ONLY": "0",
+    assert Discovery.from_environ({"ROS_LOCALHOST_ONLY": "1"}).rclpy_environment() == {**env, "ROS_LOCALHOST_ONLY": "0"}
+    assert env == {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SYSTEM_DEFAULT",
                    "SKIP_DEFAULT_XML_FILE": "1", "FASTRTPS_DEFAULT_PROFILES_FILE": str(FASTDDS_PROFILE),
                    "FASTDDS_DEFAULT_PROFILES_FILE": str(FASTDDS_PROFILE)}
     ns = {"f": "http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles"}

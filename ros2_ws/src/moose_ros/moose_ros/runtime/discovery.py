@@ -96,6 +96,8 @@ class Discovery:
     """``FASTRTPS_DEFAULT_PROFILES_FILE`` (Fast DDS 3: ``FASTDDS_DEFAULT_PROFILES_FILE``) as given; ``""``: unset."""
     rmw: str = DEFAULT_RMW
     """The RMW implementation an rclpy node of this process loads (``RMW_IMPLEMENTATION``)."""
+    localhost_only: bool = False
+    """``ROS_LOCALHOST_ONLY=1`` (deprecated) was set: the range is ``LOCALHOST`` whatever else says."""
 
     @classmethod
     def from_environ(cls, environ: Mapping[str, str] = os.environ) -> "Discovery":
@@ -126,7 +128,7 @@ class Discovery:
             raise ParamError(f"{name} = {profiles!r} names no file: Fast DDS would ignore it and run on its defaults "
                              "(every interface); unset it to stay on this host")
         return cls(chosen, peers, environ.get("CYCLONEDDS_URI", "").strip(), ignored, profiles,
-                   environ.get("RMW_IMPLEMENTATION", "").strip() or DEFAULT_RMW)
+                   environ.get("RMW_IMPLEMENTATION", "").strip() or DEFAULT_RMW, localhost_only == "1")
 
     @property
     def cyclone_loopback(self) -> bool:
@@ -194,8 +196,9 @@ class Discovery:
             return self.ros_environment()
         # ROS_LOCALHOST_ONLY=1 (read above as LOCALHOST) would make rmw_fastrtps set up transports of its own over
         # the profile's loopback binding: the profile holds it instead
-        return {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SYSTEM_DEFAULT", "ROS_LOCALHOST_ONLY": "0",
-                "SKIP_DEFAULT_XML_FILE": "1", **dict.fromkeys(FASTDDS_PROFILE_VARIABLES, str(FASTDDS_PROFILE))}
+        return {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SYSTEM_DEFAULT", "SKIP_DEFAULT_XML_FILE": "1",
+                **({"ROS_LOCALHOST_ONLY": "0"} if self.localhost_only else {}),
+                **dict.fromkeys(FASTDDS_PROFILE_VARIABLES, str(FASTDDS_PROFILE))}
 
     def describe(self, rmw: Optional[str] = None) -> str:
         """One line for the log: the range, where it reaches, and how it is held: on the Cyclone DDS backend
