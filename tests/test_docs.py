@@ -146,7 +146,7 @@ def commands_writing_markdown() -> list[tuple[str, str, list[str]]]:
     sources = [(str(p.relative_to(ROOT)), p.read_text(encoding="utf-8")) for p in markdown_files()]
     sources.append(("moose.cli.benchmark.COMMAND", COMMAND))
     found = []
-    pattern = re.compile(r"(moose\s+(?:reproduce|budget|benchmark)|moose_ros\.faults|bench/bench_realtime\.py)"
+    pattern = re.compile(r"(moose\s+(?:reproduce|budget|benchmark)|moose_ros\.fault_matrix|bench/bench_realtime\.py)"
                          r"((?:\s+(?:--[\w-]+|[\w./-]+))*)")
     for where, text in sources:
         for m in pattern.finditer(text):
@@ -167,7 +167,7 @@ def test_every_generator_command_in_the_docs_writes_to_pages_that_hold_its_block
               "bench/bench_realtime.py": ("realtime",)}
     commands = commands_writing_markdown()
     assert {generator for _, generator, _ in commands} >= {"moose reproduce", "moose budget", "moose benchmark",
-                                                           "moose_ros.faults"}
+                                                           "moose_ros.fault_matrix"}
     written: set[str] = set()
     for where, generator, files in commands:
         for name in files:
@@ -194,10 +194,10 @@ def bench_script(name: str) -> ModuleType:
 
 
 def test_the_fault_matrix_and_the_bench_tables_are_where_their_generators_write() -> None:
-    """``python -m moose_ros.faults --write PAGE`` names its page in its markers; ``bench/mutation.py --docs`` and
+    """``python -m moose_ros.fault_matrix --write PAGE`` names its page in its markers; ``bench/mutation.py --docs`` and
     ``bench/test_durations.py --docs`` write the page their ``DOCS`` names: each page holds those markers, and no other
     page does."""
-    from moose_ros.faults import MATRIX_BEGIN, MATRIX_END, WEAKEST_BEGIN, WEAKEST_END
+    from moose_ros.fault_matrix import MATRIX_BEGIN, MATRIX_END, WEAKEST_BEGIN, WEAKEST_END
 
     mutation, durations = bench_script("mutation"), bench_script("test_durations")
     written = [(MATRIX_BEGIN, MATRIX_END, re.search(r"--write (\S+)`", MATRIX_BEGIN).group(1)),

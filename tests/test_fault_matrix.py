@@ -1,13 +1,13 @@
 """The fault matrix: SIGKILL and a 0.6 s SIGSTOP of every node, in the topic graph and the CAN graph, in the middle
-of an evasive maneuver (moose_ros.faults).  In every case the car stays inside the field and either comes to a
+of an evasive maneuver (moose_ros.fault_matrix).  In every case the car stays inside the field and either comes to a
 controlled stop (the minimum-risk maneuver) or completes the maneuver, the fault's consequence is reported by the
-node that must detect it (``moose_ros.faults.DETECTORS``: not the injected fault itself, which is always an
+node that must detect it (``moose_ros.fault_matrix.DETECTORS``: not the injected fault itself, which is always an
 incident), and the run is reported as degraded with a non-zero exit status; a killed simulator (the world itself)
 is an incomplete run.
 
 The kills run in lockstep (faults at simulated time; what happens does not depend on the machine's load), the
 stalls at ``MOOSE_FAULT_RATE`` (default 1; see :data:`LOCKSTEP`).
-docs/graph.md carries the matrix this code generates (``python -m moose_ros.faults --write docs/graph.md``)."""
+docs/graph.md carries the matrix this code generates (``python -m moose_ros.fault_matrix --write docs/graph.md``)."""
 from __future__ import annotations
 
 import os
@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from isolation import claim_udp_port
-from moose_ros.faults import (
+from moose_ros.fault_matrix import (
     MATRIX_BEGIN,
     MATRIX_END,
     MATRIX_GRAPHS,
@@ -25,13 +25,13 @@ from moose_ros.faults import (
     WEAKEST_CASES,
     WEAKEST_DURATION,
     WEAKEST_END,
-    Fault,
     matrix_cases,
     reported,
     run_case,
     weakest_parameters,
     write_matrix,
 )
+from moose_ros.faults import Fault
 
 ROOT = Path(__file__).resolve().parents[1]
 RATE = float(os.environ.get("MOOSE_FAULT_RATE", "1.0"))
@@ -133,8 +133,9 @@ def test_the_reported_check_can_fail() -> None:
 
 @pytest.mark.parametrize("weakest", [False, True], ids=["matrix", "weakest"])
 def test_the_generator_finds_its_markers_on_its_page_and_writes_it_back(tmp_path: Path, weakest: bool) -> None:
-    """``python -m moose_ros.faults [--weakest] --write PAGE`` on the page its marker names: given the table the page
-    holds, the generator writes the page back byte for byte (the marker lookup and the note around the table)."""
+    """``python -m moose_ros.fault_matrix [--weakest] --write PAGE`` on the page its marker names: given the table
+    the page holds, the generator writes the page back byte for byte (the marker lookup and the note around the
+    table)."""
     begin, end = (WEAKEST_BEGIN, WEAKEST_END) if weakest else (MATRIX_BEGIN, MATRIX_END)
     match = re.search(r"--write (\S+)`", begin)
     assert match

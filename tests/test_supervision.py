@@ -7,7 +7,8 @@ import pytest
 from moose.canbus.ecu import ECU_TIMEOUT
 from moose.params import ParamError
 from moose.verdict import EXIT_DEGRADED, EXIT_FAILED, EXIT_INCOMPLETE, EXIT_INTERRUPTED, exit_status
-from moose_ros.faults import Fault, matrix_cases
+from moose_ros.fault_matrix import matrix_cases
+from moose_ros.faults import Fault
 from moose_ros.graph import (
     ACTUATOR_COMMAND,
     COMMAND_TIMEOUT,
