@@ -136,12 +136,11 @@ def test_an_unreachable_cluster_is_refused_before_any_case(tmp_path: Path, capsy
     with socket.socket() as held:  # a port that is ours and listens to nobody: connections are refused
         held.bind(("127.0.0.1", 0))
         address = f"tcp://127.0.0.1:{held.getsockname()[1]}"
-        start = time.monotonic()
         code = main(BASE + ["-o", str(tmp_path / "s"), "--address", address,
                             "--connect-timeout", "2"])
-        assert time.monotonic() - start < 30
     err = capsys.readouterr().err
     assert code == 2 and "moose: error: --address" in err and "no Dask scheduler answers" in err
+    assert "(ConnectionRefusedError: Connection refused)" in err  # the port's refusal, not a wait for a timeout
     assert not (tmp_path / "s").exists()
 
 
@@ -286,7 +285,7 @@ def test_failing_cases_are_recorded_and_the_sweep_goes_on(tmp_path: Path) -> Non
         error = rows[(duration, 0.01)]
         assert error["status"] == "error" and "RK4 needs dt" in error["error"] and error["outcome"] is None
     slow = rows[(120.0, 0.00001)]  # 121 simulated seconds at a 100 kHz plant step: about 9 s of work
-    assert slow["status"] == "timeout" and "4 s" in slow["error"] and 4.0 <= slow["wall_s"] < 30
+    assert slow["status"] == "timeout" and "4 s" in slow["error"] and slow["wall_s"] >= 4.0
 
     # a worker killed under its case (SIGKILL from outside): recorded as crashed, the sweep runs the rest.
     # Every case is long (60 s at a 10 kHz plant step, several seconds of work), and a worker holds its
