@@ -7,8 +7,9 @@
 ``make test`` writes one report per phase to ``runs/tests/`` (the parallel phase, ``pytest -n 2``, and the serial
 real-time phase).  Each test case carries its wall time (setup, call and teardown) and two properties that
 tests/conftest.py records: ``cpu_s``, the CPU seconds of the test process, and ``child_cpu_s``, those of the
-child processes it waited for (node graphs, CLI runs, inner pytest runs, and their children).  The table sums
-them per file, the most expensive first; a phase's elapsed time is its report's ``time``.
+child processes it waited for (node graphs, CLI runs, inner pytest runs, and their children), and ``worker``, the
+xdist worker that ran it.  The table sums them per file, the most expensive first; a phase's elapsed time is its
+report's ``time``, beside the sum of its tests' wall time per worker.
 """
 from __future__ import annotations
 
@@ -39,9 +40,13 @@ class FileCost:
 
 @dataclass
 class Phase:
+    """One report: its elapsed time, its tests, and the sum of their wall time per xdist worker (how even the
+    workers' loads were: the busiest bounds the phase)."""
+
     name: str
     elapsed_s: float
     tests: int
+    workers: dict[str, float] = field(default_factory=lambda: defaultdict(float))
 
 
 def outcome(case: ET.Element) -> str:
@@ -63,11 +68,13 @@ def read(paths: list[Path]) -> tuple[list[Phase], dict[tuple[str, str], FileCost
         suites = [root] if root.tag == "testsuite" else root.findall("testsuite")
         for suite in suites:
             cases = suite.findall("testcase")
-            phases.append(Phase(path.stem, float(suite.get("time", "0")), len(cases)))
+            phase = Phase(path.stem, float(suite.get("time", "0")), len(cases))
+            phases.append(phase)
             for case in cases:
                 name = case.get("classname", "").rsplit(".", 1)[-1] + ".py"
                 cost = files.setdefault((name, path.stem), FileCost(path.stem))
                 props = {p.get("name"): p.get("value") for p in case.iter("property")}
+                phase.workers[props.get("worker") or "?"] += float(case.get("time", "0"))
                 cost.tests += 1
                 cost.wall_s += float(case.get("time", "0"))
                 cost.cpu_s += float(props.get("cpu_s") or 0.0)
@@ -78,8 +85,9 @@ def read(paths: list[Path]) -> tuple[list[Phase], dict[tuple[str, str], FileCost
 
 def table(phases: list[Phase], files: dict[tuple[str, str], FileCost], top: int) -> str:
     """Markdown: the phases, then the ``top`` most expensive files (by the sum of wall time) and the rest in one row."""
-    lines = ["| phase | tests | elapsed (s) |", "|---|---:|---:|"]
-    lines += [f"| {p.name} | {p.tests} | {p.elapsed_s:.0f} |" for p in phases]
+    lines = ["| phase | tests | elapsed (s) | test time per worker (s) |", "|---|---:|---:|---|"]
+    lines += [f"| {p.name} | {p.tests} | {p.elapsed_s:.0f} | "
+              f"{', '.join(f'{w} {t:.0f}' for w, t in sorted(p.workers.items()))} |" for p in phases]
     total_wall = sum(c.wall_s for c in files.values())
     total_cpu = sum(c.cpu_s for c in files.values())
     total_child = sum(c.child_cpu_s for c in files.values())

@@ -83,12 +83,13 @@ def pytest_runtest_setup(item: pytest.Item) -> Iterator[None]:
 @pytest.hookimpl(wrapper=True, tryfirst=True)
 def pytest_runtest_teardown(item: pytest.Item) -> Iterator[None]:
     """The CPU seconds a test took, setup to teardown, in the test process and in the child processes it waited
-    for (nodes, CLI runs, and their children), as properties of its report: ``--junitxml`` writes them and
-    bench/test_durations.py tabulates them (docs/testing.md, "Testing")."""
+    for (nodes, CLI runs, and their children), and the xdist worker that ran it, as properties of its report:
+    ``--junitxml`` writes them and bench/test_durations.py tabulates them (docs/testing.md, "Testing")."""
     result = yield
     if CPU_AT_SETUP in item.stash:
         (own0, children0), (own1, children1) = item.stash[CPU_AT_SETUP], _cpu_seconds()
-        item.user_properties += [("cpu_s", f"{own1 - own0:.3f}"), ("child_cpu_s", f"{children1 - children0:.3f}")]
+        item.user_properties += [("cpu_s", f"{own1 - own0:.3f}"), ("child_cpu_s", f"{children1 - children0:.3f}"),
+                                 ("worker", os.environ.get("PYTEST_XDIST_WORKER", "main"))]
     return result
 
 
