@@ -43,12 +43,16 @@ DDS_VARIABLES = ("ROS_DOMAIN_ID", "CYCLONEDDS_URI", "ROS_AUTOMATIC_DISCOVERY_RAN
                  "ROS_LOCALHOST_ONLY")
 """What the test run sets for its own isolation (tests/conftest.py); removed so the bridge runs on its defaults."""
 ATTACK_S = 4.0
-"""How long each publisher sends (s): Cyclone DDS discovery on a quiet link takes well under a second."""
+"""How long a publisher that must not be matched sends (s): Cyclone DDS discovery on a quiet link takes well
+under a second."""
+AFTER_MATCH_S = 1.5
+"""How long a publisher that must be matched goes on sending once it is (s): 150 commands, which the bridge puts
+on the bus at its 100 Hz frame rate."""
 START_TIMEOUT = 60.0
 
 PUBLISHER = textwrap.dedent("""
     import json, sys, time
-    mode, config, duration = sys.argv[1], sys.argv[2], float(sys.argv[3])
+    mode, config, duration, after_match = sys.argv[1], sys.argv[2], float(sys.argv[3]), float(sys.argv[4])
     steer, torque = 0.3, 200.0
     if mode == "rclpy":  # a plain rclpy node (Fast DDS), not our runtime: ROS 2's own settings
         import rclpy
@@ -80,7 +84,7 @@ PUBLISHER = textwrap.dedent("""
         make = lambda: cls(steering_angle=steer, torque_rl=torque, torque_rr=torque)
         write, matched = writer.write, lambda: len(writer.get_matched_subscriptions())
     start, best, first = time.monotonic(), 0, None
-    while time.monotonic() - start < duration:
+    while time.monotonic() - start < duration and (first is None or time.monotonic() - start - first < after_match):
         msg = make()
         now = time.time()
         msg.header.stamp.sec, msg.header.stamp.nanosec = int(now), int((now % 1) * 1e9)
@@ -94,14 +98,16 @@ PUBLISHER = textwrap.dedent("""
 """)
 
 LISTENER = textwrap.dedent("""
-    import json, sys, time
+    import json, sys, threading, time
     from moose.canbus.bus import DEFAULT_GROUP, DEFAULT_PORT, open_bus
     from moose.canbus.codec import default_database
     db, duration = default_database(), float(sys.argv[1])
+    done = threading.Event()  # the test closes our stdin when the publishers have ended
+    threading.Thread(target=lambda: (sys.stdin.read(), done.set()), daemon=True).start()
     bus = open_bus("udp_multicast", DEFAULT_GROUP, DEFAULT_PORT)
     print("ready", flush=True)
     frames, steer, torque, start = 0, 0.0, 0.0, time.monotonic()
-    while time.monotonic() - start < duration:
+    while time.monotonic() - start < duration and not done.is_set():
         frame = bus.recv(timeout=0.05)
         if frame is None or frame.arbitration_id not in (0x100, 0x101):
             continue
@@ -159,8 +165,8 @@ class Hosts:
               base: Optional[dict[str, str]] = None) -> subprocess.Popen:
         env = {k: v for k, v in (os.environ if base is None else base).items() if k not in DDS_VARIABLES}
         env.update(env_extra or {})
-        proc = subprocess.Popen(["ip", "netns", "exec", ns, *args], env=env, stdout=subprocess.PIPE,
-                                stderr=subprocess.STDOUT, text=True, start_new_session=True)
+        proc = subprocess.Popen(["ip", "netns", "exec", ns, *args], env=env, stdin=subprocess.PIPE,
+                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
         self.procs.append(proc)
         return proc
 
@@ -219,6 +225,9 @@ class Lines:
         raise AssertionError(f"no {text!r} within {timeout} s; output:\n{''.join(self.lines)}")
 
     def result(self, timeout: float) -> dict:
+        """The JSON line the process printed last, once it has ended (closing its stdin asks a listener to end)."""
+        if self.proc.stdin is not None and not self.proc.stdin.closed:
+            self.proc.stdin.close()
         try:
             self.proc.wait(timeout=timeout)
         except subprocess.TimeoutExpired:
@@ -249,13 +258,18 @@ def start_bridge(hosts: Hosts, runtime: tuple[str, str, dict[str, str]],
 
 
 def attack(hosts: Hosts, ns: str, mode: str, config: str = "", env: Optional[dict[str, str]] = None,
-           runtime: Optional[tuple[str, str, dict[str, str]]] = None) -> Lines:
+           runtime: Optional[tuple[str, str, dict[str, str]]] = None, reaches: bool = False) -> Lines:
+    """A publisher of 0.3 rad and 200 N·m in namespace ``ns``: for ATTACK_S, or, when it ``reaches`` the bridge
+    (the check that the test can fail), until AFTER_MATCH_S after its first match."""
     python, base = (sys.executable, None) if runtime is None else runtime[1:]
-    return Lines(hosts.spawn(ns, [python, "-c", PUBLISHER, mode, config, str(ATTACK_S)], env, base))
+    after = AFTER_MATCH_S if reaches else ATTACK_S
+    return Lines(hosts.spawn(ns, [python, "-c", PUBLISHER, mode, config, str(ATTACK_S), str(after)], env, base))
 
 
 def listen(hosts: Hosts) -> Lines:
-    listener = Lines(hosts.spawn(hosts.a, [sys.executable, "-c", LISTENER, str(ATTACK_S + 4.0)]))
+    """A decoder of the bus's command frames in namespace a, until its result is asked for (Lines.result), once
+    the publishers have ended."""
+    listener = Lines(hosts.spawn(hosts.a, [sys.executable, "-c", LISTENER, str(ATTACK_S + 60.0)]))
     listener.wait_for("ready", START_TIMEOUT)
     return listener
 
@@ -306,7 +320,7 @@ def test_the_bridge_on_its_defaults_cannot_be_reached_from_another_host(
         assert frames["command_frames"] > 100 and frames["max_steer"] == 0.0 and frames["max_torque"] == 0.0, frames
         # the same commands from the bridge's own host, on the runtime's defaults, do reach the bus
         bus = listen(hosts)
-        local = attack(hosts, hosts.a, "runtime", runtime=runtime).result(ATTACK_S + 30)
+        local = attack(hosts, hosts.a, "runtime", runtime=runtime, reaches=True).result(ATTACK_S + 30)
         frames = bus.result(ATTACK_S + 30)
         assert local["matched"] >= 1, local
         assert frames["max_steer"] == pytest.approx(0.3, abs=1e-3) and frames["max_torque"] > 100.0, frames
@@ -329,7 +343,7 @@ def test_the_opt_in_reaches_the_bridge_from_another_host(hosts: Hosts, runtime: 
     bridge = start_bridge(hosts, runtime, env)
     try:
         bus = listen(hosts)
-        remote = attack(hosts, hosts.b, "plain", config).result(ATTACK_S + 30)
+        remote = attack(hosts, hosts.b, "plain", config, reaches=True).result(ATTACK_S + 30)
         frames = bus.result(ATTACK_S + 30)
     finally:
         stop(bridge.proc)
