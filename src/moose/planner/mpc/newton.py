@@ -14,7 +14,7 @@ from .projected_newton import CompilerMissing, NewtonOptions, NewtonStatus, Proj
 from .solver import Solver, SolveResult, SolveStatus, register
 
 STATUS: dict[NewtonStatus, SolveStatus] = {
-    "converged": "converged", "small_step": "converged",  # step below step_tol: fmincon's exit flag 2
+    "converged": "converged",  # ‖u − P(u − ∇f)‖∞ ≤ optimality_tol: fmincon's exit flag 1 (never a short step alone)
     "max_iter": "capped", "max_evals": "capped", "line_search": "capped",  # a limit of Table II or the search
     "not_finite": "failed"}
 

@@ -9,7 +9,8 @@
  * and the definition of PN_N, the number of decision variables.
  *
  * One iteration at u with gradient g and Hessian H:
- *   1. w = || u - P(u - g) ||_inf (the first-order optimality measure); stop if w <= tol_opt.
+ *   1. w = || u - P(u - g) ||_inf (the first-order optimality measure); stop if w <= tol_opt.  This is
+ *      the only convergence test: a short step is not one (see 5).
  *   2. epsilon-active set A: u_i within min(eps_active, w) of a bound with g_i pushing out of
  *      the box; the free set F is the rest.
  *   3. Direction: d_A = -g_A (the projection keeps those variables on their bound);
@@ -21,7 +22,13 @@
  *      be convex.
  *   4. Armijo backtracking along the projection arc u(a) = P(u + a d), a = 1, rho, rho^2, ...:
  *      accept the first u(a) with f(u(a)) < f(u) and f(u(a)) <= f(u) + sigma g'(u(a) - u).
- *   5. Stop if the step ||u(a) - u||_inf < tol_step.
+ *   5. Newton's direction has failed if the search accepts no point, or only one it had to
+ *      shorten to a step ||u(a) - u||_inf < tol_step: H is then a poor model of f along d (a
+ *      kink of the Hessian, e.g. the speed-floor penalty switching on, or a large shift tau).
+ *      The iteration then searches along the projected gradient d = -g as in 4 (Bertsekas'
+ *      safeguard: the arc P(u - a g) decreases f for small a wherever w > 0) and takes the
+ *      lower of the two points.  If neither search accepts a point the iteration stops with
+ *      PN_LINE_SEARCH, not converged.
  * Counting: every cost evaluation at a new point counts once against max_evals, the start
  * included; the derivatives at an accepted trial point are part of that point's evaluation
  * (as an objective that returns its gradient counts once in fmincon).
@@ -31,11 +38,10 @@
 
 enum {
   PN_CONVERGED = 0,   /* first-order optimality measure below tol_opt */
-  PN_SMALL_STEP = 1,  /* step below tol_step */
-  PN_MAX_ITER = 2,    /* iteration cap */
-  PN_MAX_EVALS = 3,   /* evaluation cap */
-  PN_LINE_SEARCH = 4, /* no decrease within max_ls backtracking steps */
-  PN_NOT_FINITE = 5   /* cost or derivatives not finite at an accepted point */
+  PN_MAX_ITER = 1,    /* iteration cap */
+  PN_MAX_EVALS = 2,   /* evaluation cap */
+  PN_LINE_SEARCH = 3, /* no decrease within max_ls backtracking steps, along Newton's direction nor -g */
+  PN_NOT_FINITE = 4   /* cost or derivatives not finite at an accepted point */
 };
 
 /* Layout of the options vector. */
@@ -143,12 +149,46 @@ static double pn_optimality(const double *u, const double *g, const double *lb, 
   return w;
 }
 
+/* Step 4: Armijo backtracking along the projection arc P(u + a d) from a = 1.  The accepted point goes to trial,
+ * its cost to *f_trial and its a to *alpha.  Returns 1 if a point was accepted, 0 if none within max_ls backtracks,
+ * -1 if the evaluation cap came first. */
+static int pn_search(pn_work *ws, const double *p, const double *lb, const double *ub, const double *opt,
+                     const double *u, double f, const double *g, const double *d, double *trial, double *f_trial,
+                     double *alpha, int *evals) {
+  const int max_evals = (int)opt[OPT_MAX_EVALS], max_ls = (int)opt[OPT_MAX_LS];
+  double a = 1.0;
+  for (int j = 0; j <= max_ls; ++j) {
+    if (*evals >= max_evals) return -1;
+    double slope = 0.0;
+    for (int i = 0; i < PN_N; ++i) {
+      trial[i] = pn_clip(u[i] + a * d[i], lb[i], ub[i]);
+      slope += g[i] * (trial[i] - u[i]);
+    }
+    ++*evals;
+    if (pn_cost_at(ws, trial, p, f_trial) && *f_trial < f && *f_trial <= f + opt[OPT_SIGMA] * slope) {
+      *alpha = a;
+      return 1;
+    }
+    a *= opt[OPT_RHO];
+  }
+  return 0;
+}
+
+static double pn_step(const double *u, const double *trial) {
+  double step = 0.0;
+  for (int i = 0; i < PN_N; ++i) {
+    double s = fabs(trial[i] - u[i]);
+    if (s > step) step = s;
+  }
+  return step;
+}
+
 static int pn_iterate(pn_work *ws, const double *p, const double *lb, const double *ub, const double *opt,
-                      double *u, double *info, double *g, double *H, double *d, double *trial, double *Hf,
-                      double *L, double *gf, double *df, int *free_idx) {
-  const int max_iter = (int)opt[OPT_MAX_ITER], max_evals = (int)opt[OPT_MAX_EVALS], max_ls = (int)opt[OPT_MAX_LS];
+                      double *u, double *info, double *g, double *H, double *d, double *trial, double *trial_g,
+                      double *Hf, double *L, double *gf, double *df, int *free_idx) {
+  const int max_iter = (int)opt[OPT_MAX_ITER];
   double f = 0.0, w = 0.0;
-  int iter = 0, evals = 1;
+  int iter = 0, evals = 1, capped = 0;
   info[INFO_ITER] = 0;
   info[INFO_EVALS] = 1;
   info[INFO_OPTIMALITY] = INFINITY;
@@ -162,6 +202,7 @@ static int pn_iterate(pn_work *ws, const double *p, const double *lb, const doub
     w = pn_optimality(u, g, lb, ub);
     if (w <= opt[OPT_TOL_OPT]) { status = PN_CONVERGED; break; }
     if (iter >= max_iter) { status = PN_MAX_ITER; break; }
+    if (capped) { status = PN_MAX_EVALS; break; }
     /* epsilon-active set and direction */
     double eps = w < opt[OPT_EPS_ACTIVE] ? w : opt[OPT_EPS_ACTIVE];
     int m = 0;
@@ -178,34 +219,26 @@ static int pn_iterate(pn_work *ws, const double *p, const double *lb, const doub
       if (pn_shifted_newton(m, Hf, gf, opt[OPT_REGULARISATION] * w, opt[OPT_SHIFT], L, df))
         for (int a = 0; a < m; ++a) d[free_idx[a]] = df[a];
     }
-    /* Armijo backtracking along the projection arc */
-    double alpha = 1.0, f_trial = INFINITY;
-    int accepted = 0, capped = 0;
-    for (int j = 0; j <= max_ls; ++j) {
-      if (evals >= max_evals) { capped = 1; break; }
-      double slope = 0.0;
-      for (int i = 0; i < PN_N; ++i) {
-        trial[i] = pn_clip(u[i] + alpha * d[i], lb[i], ub[i]);
-        slope += g[i] * (trial[i] - u[i]);
+    double f_newton = INFINITY, f_gradient = INFINITY, alpha = 1.0;
+    int newton = pn_search(ws, p, lb, ub, opt, u, f, g, d, trial, &f_newton, &alpha, &evals);
+    const double *next = newton == 1 ? trial : NULL;
+    double f_next = f_newton;
+    if (newton == 0 || (newton == 1 && alpha < 1.0 && pn_step(u, trial) < opt[OPT_TOL_STEP])) {
+      /* step 5: Newton's direction failed; the projected gradient */
+      for (int i = 0; i < PN_N; ++i) d[i] = -g[i];
+      int gradient = pn_search(ws, p, lb, ub, opt, u, f, g, d, trial_g, &f_gradient, &alpha, &evals);
+      if (gradient == 1 && f_gradient < f_next) {
+        next = trial_g;
+        f_next = f_gradient;
       }
-      ++evals;
-      if (pn_cost_at(ws, trial, p, &f_trial) && f_trial < f && f_trial <= f + opt[OPT_SIGMA] * slope) {
-        accepted = 1;
-        break;
-      }
-      alpha *= opt[OPT_RHO];
+      capped = gradient < 0;
+    } else {
+      capped = newton < 0;
     }
-    if (capped) { status = PN_MAX_EVALS; break; }
-    if (!accepted) { status = PN_LINE_SEARCH; break; }
-    double step = 0.0;
-    for (int i = 0; i < PN_N; ++i) {
-      double s = fabs(trial[i] - u[i]);
-      if (s > step) step = s;
-      u[i] = trial[i];
-    }
-    f = f_trial;
+    if (next == NULL) { status = capped ? PN_MAX_EVALS : PN_LINE_SEARCH; break; }
+    for (int i = 0; i < PN_N; ++i) u[i] = next[i];
+    f = f_next;
     ++iter;
-    if (step < opt[OPT_TOL_STEP]) { status = PN_SMALL_STEP; break; }
     if (!pn_derivatives_at(ws, u, p, &f, g, H)) { status = PN_NOT_FINITE; break; }
   }
   info[INFO_F] = f;
@@ -233,15 +266,15 @@ int pn_solve(const double *u0, const double *p, const double *lb, const double *
   ws.arg = malloc(sizeof(*ws.arg) * (size_t)(sz_arg > 0 ? sz_arg : 1));
   ws.res = malloc(sizeof(*ws.res) * (size_t)(sz_res > 0 ? sz_res : 1));
   ws.iw = malloc(sizeof(*ws.iw) * (size_t)(sz_iw > 0 ? sz_iw : 1));
-  double *buffer = malloc(sizeof(double) * (size_t)((sz_w > 0 ? sz_w : 1) + 3 * n * n + 5 * n));
+  double *buffer = malloc(sizeof(double) * (size_t)((sz_w > 0 ? sz_w : 1) + 3 * n * n + 6 * n));
   int *free_idx = malloc(sizeof(int) * (size_t)n);
   int status = -1;
   if (ws.arg && ws.res && ws.iw && buffer && free_idx) {
     ws.w = buffer;
     double *H = buffer + (sz_w > 0 ? sz_w : 1), *Hf = H + n * n, *L = Hf + n * n;
-    double *g = L + n * n, *d = g + n, *trial = d + n, *gf = trial + n, *df = gf + n;
+    double *g = L + n * n, *d = g + n, *trial = d + n, *trial_g = trial + n, *gf = trial_g + n, *df = gf + n;
     for (int i = 0; i < n; ++i) u[i] = pn_clip(u0[i], lb[i], ub[i]);
-    status = pn_iterate(&ws, p, lb, ub, opt, u, info, g, H, d, trial, Hf, L, gf, df, free_idx);
+    status = pn_iterate(&ws, p, lb, ub, opt, u, info, g, H, d, trial, trial_g, Hf, L, gf, df, free_idx);
     info[INFO_STATUS] = status;
   }
   free(free_idx);

@@ -3,12 +3,13 @@
 min f(u, p) s.t. lb ≤ u ≤ ub (Bertsekas 1982): exact Hessian on the variables off
 their bounds, regularised in proportion to the distance from stationarity and made
 positive definite by a sufficient multiple of the identity (Nocedal & Wright,
-Alg. 3.3), Armijo backtracking along the projection arc.  The cost is a CasADi
-function; its gradient and Hessian come from CasADi's automatic differentiation,
-and the iteration itself (``projected_newton.c``) is compiled together with the
-generated C of the cost and its derivatives into one shared object (``ccompile``),
-so one solve is one C call.  The algorithm and the way evaluations are counted are
-stated at the top of ``projected_newton.c``.
+Alg. 3.3), Armijo backtracking along the projection arc, and the projected gradient
+where Newton's direction fails; ``converged`` only at a point stationary to
+``tol_opt``.  The cost is a CasADi function; its gradient and Hessian come from
+CasADi's automatic differentiation, and the iteration itself (``projected_newton.c``)
+is compiled together with the generated C of the cost and its derivatives into one
+shared object (``ccompile``), so one solve is one C call.  The algorithm and the way
+evaluations are counted are stated at the top of ``projected_newton.c``.
 
 This is the MPC planner's solver (``mpc.solver = projected_newton``): the paper's
 problem, eq. (planmpc), has only the input bounds as constraints, and a general
@@ -27,10 +28,11 @@ import numpy as np
 from ...ccompile import CompiledFunction, compile_library
 from ...params import check, positive
 
-NewtonStatus = Literal["converged", "small_step", "max_iter", "max_evals", "line_search", "not_finite"]
-"""Why the iteration stopped, in the order of the C enum ``PN_*``."""
-STATUSES: tuple[NewtonStatus, ...] = ("converged", "small_step", "max_iter", "max_evals", "line_search",
-                                      "not_finite")
+NewtonStatus = Literal["converged", "max_iter", "max_evals", "line_search", "not_finite"]
+"""Why the iteration stopped, in the order of the C enum ``PN_*``: ``converged`` only when ‖u − P(u − ∇f)‖∞ ≤
+``tol_opt`` (a short step is not a stop); ``line_search``: no decrease along Newton's direction nor the projected
+gradient."""
+STATUSES: tuple[NewtonStatus, ...] = ("converged", "max_iter", "max_evals", "line_search", "not_finite")
 
 _P = ctypes.POINTER(ctypes.c_double)
 
@@ -54,7 +56,8 @@ class NewtonOptions:
     tol_opt: float = 1e-3
     """Stop when ‖u − P(u − ∇f)‖∞ is at most this."""
     tol_step: float = 1e-3
-    """Stop when a step's ‖Δu‖∞ is below this."""
+    """A Newton step the line search shortened below this ‖Δu‖∞ counts as a failed direction: the iteration
+    searches along the projected gradient too (not a stopping test)."""
     shift: float = 1e-3
     """β of Alg. 3.3 relative to max(1, max |H_ii|): the first shift tried on a non-positive diagonal."""
     regularisation: float = 0.1
