@@ -2,6 +2,7 @@
 outlives the run."""
 from __future__ import annotations
 
+import ast
 import os
 import resource
 import subprocess
@@ -150,8 +151,6 @@ def xdist_group(nodeid: str, shared: dict[str, str]) -> str:
 def files_sharing_fixtures(tests: Path = Path(__file__).parent) -> dict[str, str]:
     """Test file name → the fixture of :data:`SHARED_FIXTURES` that one of its functions (a test or a fixture)
     takes as a parameter: read from the source, since the xdist controller does not collect the tests."""
-    import ast
-
     found = {}
     for path in sorted(tests.glob("test_*.py")):
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
@@ -163,18 +162,68 @@ def files_sharing_fixtures(tests: Path = Path(__file__).parent) -> dict[str, str
     return found
 
 
+def _is_slow_mark(node: ast.expr) -> bool:
+    """``pytest.mark.slow``, bare or called."""
+    node = node.func if isinstance(node, ast.Call) else node
+    return isinstance(node, ast.Attribute) and node.attr == "slow" and isinstance(node.value, ast.Attribute) \
+        and node.value.attr == "mark"
+
+
+def slow_tests(tests: Path = Path(__file__).parent) -> dict[str, set[str]]:
+    """Test file name → the names of its test functions marked ``slow`` (by a decorator, or every one of them by
+    the file's ``pytestmark``), read from the source as :func:`files_sharing_fixtures`."""
+    found: dict[str, set[str]] = {}
+    for path in sorted(tests.glob("test_*.py")):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        file_marks = [mark for node in tree.body if isinstance(node, ast.Assign)
+                      and any(isinstance(t, ast.Name) and t.id == "pytestmark" for t in node.targets)
+                      for mark in (node.value.elts if isinstance(node.value, (ast.List, ast.Tuple)) else [node.value])]
+        every = any(_is_slow_mark(mark) for mark in file_marks)
+        functions = [node for node in ast.walk(tree) if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))]
+        found[path.name] = {f.name for f in functions if f.name.startswith("test")
+                            and (every or any(_is_slow_mark(d) for d in f.decorator_list))}
+    return found
+
+
+def slowest_first(groups: dict[str, list[str]], slow: dict[str, set[str]]) -> list[str]:
+    """The groups of the parallel phase in the order they are handed out: most tests marked ``slow`` first (then the
+    most tests).  The workers take the next group whenever they finish one, so the longest groups start at once and
+    the short ones fill in at the end (xdist's own order, most tests first, left a file of two graph runs for last,
+    one worker running it while the other had nothing left)."""
+
+    def slow_count(nodeids: list[str]) -> int:
+        def function(nodeid: str) -> str:
+            return nodeid.split("::")[-1].split("[", 1)[0].split("@", 1)[0]
+
+        return sum(function(n) in slow.get(Path(n.split("::", 1)[0]).name, ()) for n in nodeids)
+
+    return sorted(groups, key=lambda group: (-slow_count(groups[group]), -len(groups[group]), group))
+
+
 def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
-    """``--dist loadgroup`` with the groups of :func:`xdist_group`.  xdist's own loadgroup marks a test's group by
-    rewriting its id, which pytest 9.2 no longer lets it do (every test would be scheduled alone, silently): the
-    groups are therefore given to the scheduler here, from the ids it is sent."""
+    """``--dist loadgroup`` with the groups of :func:`xdist_group`, handed out slowest first
+    (:func:`slowest_first`).  xdist's own loadgroup marks a test's group by rewriting its id, which pytest 9.2 no
+    longer lets it do (every test would be scheduled alone, silently): the groups are therefore given to the
+    scheduler here, from the ids it is sent."""
     if config.getoption("dist") != "loadgroup":
         return None
     from xdist.scheduler import LoadScopeScheduling
 
-    shared = files_sharing_fixtures()
+    shared, slow = files_sharing_fixtures(), slow_tests()
 
     class GroupScheduling(LoadScopeScheduling):
+        ordered = False
+
         def _split_scope(self, nodeid: str) -> str:
             return xdist_group(nodeid, shared)
+
+        def _assign_work_unit(self, node: Any) -> None:
+            if not self.ordered:  # the queue is complete when the first group is handed out
+                queue = {group: self.workqueue[group] for group in slowest_first(
+                    {group: list(tests) for group, tests in self.workqueue.items()}, slow)}
+                self.workqueue.clear()
+                self.workqueue.update(queue)
+                self.ordered = True
+            super()._assign_work_unit(node)
 
     return GroupScheduling(config, log)

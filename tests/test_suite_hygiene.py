@@ -84,3 +84,37 @@ def test_the_parallel_run_keeps_each_file_in_one_worker() -> None:
         if found:
             workers[found.group(2)].add(found.group(1))
     assert all(len(w) == 1 for w in workers.values()), workers
+
+
+def test_the_parallel_phase_hands_out_the_slowest_groups_first() -> None:
+    """The groups with the most tests marked ``slow`` go first, then those with the most tests (tests/conftest.py):
+    read from the source, a parametrized slow test counting once per case."""
+    from conftest import slow_tests, slowest_first
+
+    slow = slow_tests()
+    assert "test_wheels_install_into_a_fresh_environment_and_run_from_anywhere" in slow["test_install.py"]  # pytestmark
+    assert "test_failing_cases_are_recorded_and_the_sweep_goes_on" in slow["test_sweep.py"]  # a decorator
+    assert "test_an_unreachable_cluster_is_refused_before_any_case" not in slow["test_sweep.py"]
+    failing, bad = "test_failing_cases_are_recorded_and_the_sweep_goes_on", "test_bad_input_is_refused_before_any_case"
+    groups = {"tests/test_tire.py": [f"tests/test_tire.py::test_{i}" for i in range(5)],
+              "paper_runs": [f"tests/test_sweep.py::{bad}[a]"],
+              "tests/test_sweep.py": [f"tests/test_sweep.py::{failing}[0]", f"tests/test_sweep.py::{failing}[1]",
+                                      f"tests/test_sweep.py::{bad}"],
+              "tests/test_install.py": ["tests/test_install.py::"
+                                        "test_wheels_install_into_a_fresh_environment_and_run_from_anywhere"]}
+    assert slowest_first(groups, slow) == ["tests/test_sweep.py", "tests/test_install.py", "tests/test_tire.py",
+                                           "paper_runs"]
+
+
+@pytest.mark.slow
+def test_the_parallel_run_hands_out_groups_in_that_order() -> None:
+    """One worker runs the groups in the order it is handed them: the file of more tests first, although it is
+    named last and xdist's own reordering is off."""
+    files = ("tests/test_kinematics.py", "tests/test_tire.py")  # 5 and 7 tests, none slow
+    out = subprocess.run([sys.executable, "-m", "pytest", "-n", "1", "--dist", "loadgroup", "--no-loadscope-reorder",
+                          "-p", "no:randomly", "-p", "no:cacheprovider", "-v", *files], cwd=TESTS.parent,
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
+    ran = [found.group(1) for found in re.finditer(r"\[gw0\] \[\s*\d+%\] PASSED (\S+?)::", out.stdout)]
+    assert ran == ["tests/test_tire.py"] * 7 + ["tests/test_kinematics.py"] * 5, ran
+
