@@ -23,6 +23,7 @@ recorded into that bag directory.  A node that dies is reported, and the rest of
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import math
@@ -32,28 +33,25 @@ import subprocess
 import sys
 import threading
 import time
-from typing import Any, Mapping, Optional, Sequence, Union
-
-import numpy as np
+from pathlib import Path
+from typing import Any, Iterator, Mapping, Optional, Sequence, TextIO, Union
 
 from moose.config import load_config, with_overrides
 from moose.metrics import summarize
 from moose.params import ParamError, read_ros_params
 from moose.planner import MODE_PLANNERS
-from moose.planner.step import PlanningRecord
 from moose.scenario import Scenario
-from moose.schema import Config, PlannerMode
-from moose.signals import Blend, Reference
-from moose.simulation import SimulationResult
+from moose.schema import PlannerMode
 from moose.verdict import exit_status
 
-from . import convert as cv
 from .bag import Recorder
 from .bag.params import RunParameters
 from .faults import Fault, FaultInjector
-from .graph import BLEND, DIAGNOSTICS, GRAPHS, NODES, ODOM, PLAN_MPC, STEERING, THREAT, TOPICS
-from .incidents import RATE_TOLERANCE, IncidentLog
-from .lockstep import MONITORED, STUCK_TIMEOUT, sensor_transit
+from .graph import DIAGNOSTICS, GRAPHS, NODES
+from .incidents import RATE_TOLERANCE
+from .live import LiveView
+from .lockstep import STUCK_TIMEOUT, sensor_transit
+from .monitor import Monitor
 from .parameters import check_parameter_file, node_parameters, parameter_names
 from .process import spawn
 from .runtime import create_node, process, rclpy_missing
@@ -66,94 +64,6 @@ DOMAIN_CHECK = 1.0
 MONITOR_NAME = "moose_monitor"
 LOCKSTEP_MIN_RATE = 0.05
 """The slowest lockstep run the launcher waits for (simulated seconds per wall-clock second), beyond start-up."""
-
-
-@dataclasses.dataclass
-class Monitor:
-    """Collects what the graph publishes into a :class:`SimulationResult`."""
-
-    scenario: Scenario
-    config: Config
-    odom: list = dataclasses.field(default_factory=list)
-    delta: float = 0.0
-    plans: list = dataclasses.field(default_factory=list)
-    weights: dict = dataclasses.field(default_factory=dict)
-    first_threat: Any = None
-    current_threat: Any = None
-    diagnostics: dict = dataclasses.field(default_factory=dict)
-    """Each node's last status: name → (level, message)."""
-    finished: bool = False
-    log: IncidentLog = dataclasses.field(default_factory=IncidentLog)
-    heard: dict = dataclasses.field(default_factory=dict)
-    """Each node's last status arrival: name → (wall-clock monotonic s, simulated s or None)."""
-    pace: list = dataclasses.field(default_factory=list)
-    """(wall-clock monotonic s, simulated s) of the first and the last odometry sample."""
-    invalid: int = 0
-    """Invalid plans and threats dropped (moose_ros.convert validates them)."""
-
-    def attach(self, node: Any) -> None:  # a tool that must not miss a sample (graph.Topic.tool_qos)
-        callbacks = {ODOM.name: self.on_odom, STEERING.name: lambda m: setattr(self, "delta", m.delta),
-                     PLAN_MPC.name: self.on_mpc, THREAT.name: self.on_threat, DIAGNOSTICS.name: self.on_diagnostics,
-                     BLEND.name: lambda m: self.weights.__setitem__(cv.time_of(m), m.weight_mpc)}
-        for name in MONITORED:  # a lockstep graph waits for these readers too (moose_ros.lockstep.MONITORED)
-            TOPICS[name].tool_subscription(node, callbacks[name])
-
-    def on_odom(self, m: Any) -> None:
-        p, q, v = m.pose.pose.position, m.pose.pose.orientation, m.twist.twist.linear
-        yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
-        t = cv.time_of(m)
-        self.odom.append((t, p.x, p.y, yaw, v.x, v.y, self.delta))
-        now = (time.monotonic(), t)
-        self.pace = [self.pace[0] if self.pace else now, now]
-
-    @property
-    def sim_time(self) -> Optional[float]:
-        """The newest simulated time seen on /vehicle/odom (``None`` before the first sample)."""
-        return self.odom[-1][0] if self.odom else None
-
-    def real_time_factor(self) -> Optional[float]:
-        """Simulated seconds per wall-clock second between the first and the last odometry sample (``None``
-        over less than 0.2 s of wall-clock time)."""
-        if len(self.pace) < 2 or self.pace[1][0] - self.pace[0][0] < 0.2:
-            return None
-        return (self.pace[1][1] - self.pace[0][1]) / (self.pace[1][0] - self.pace[0][0])
-
-    def on_mpc(self, m: Any) -> None:
-        try:
-            t, _, plan = cv.stamped_plan_from_msg(m)
-            self.plans.append((t, plan, self.current_threat))
-        except cv.InvalidMessage:
-            self.invalid += 1
-
-    def on_threat(self, m: Any) -> None:
-        try:
-            self.current_threat = cv.threat_from_msg(m)
-        except cv.InvalidMessage:
-            self.invalid += 1
-            return
-        if self.current_threat is not None and self.first_threat is None:
-            self.first_threat = self.current_threat
-
-    def on_diagnostics(self, m: Any) -> None:
-        for status in m.status:
-            level = status.level if isinstance(status.level, int) else status.level[0]
-            self.diagnostics[status.name] = (level, status.message)
-            self.heard[status.name] = (time.monotonic(), self.sim_time)
-            self.log.on_status(self.sim_time, status.name, level, status.message,
-                               {kv.key: kv.value for kv in status.values})
-            if status.name == "vehicle_simulator" and status.message.startswith("finished"):
-                self.finished = True
-
-    def result(self, planner: PlannerMode, seed: int) -> SimulationResult:
-        rows = np.array(sorted(self.odom)) if self.odom else np.zeros((0, 7))  # no odometry: judged incomplete
-        trace = {name: rows[:, i] for i, name in enumerate(("t", "x", "y", "theta", "vx", "vy", "delta"))}
-        planning = [
-            PlanningRecord(t, threat, plan, None, Blend(self.weights.get(t, float("nan")), plan.accel),
-                           Reference(0.0, 0.0), float("nan"))
-            for t, plan, threat in self.plans
-        ]
-        return SimulationResult(self.scenario, planner, seed, trace, planning, self.first_threat,
-                                self.config, self.scenario.lead_time + self.scenario.duration)
 
 
 def _file_params(params_file: Optional[str], node: str) -> dict[str, Any]:
@@ -257,8 +167,8 @@ def launch(
     rate: float = 1.0,
     duration: Optional[float] = None,
     faults: Sequence[Fault] = (),
-    out=sys.stdout,
-    bag: Optional[Any] = None,
+    out: TextIO = sys.stdout,
+    bag: Optional[Union[str, Path]] = None,
     foxglove: Optional[tuple[str, int]] = None,
     runtime: Union[None, str, Mapping[str, str]] = None,
     lockstep: bool = False,
@@ -285,139 +195,319 @@ def launch(
         if fault.node not in overrides:
             raise ParamError(f"--fault {str(fault)!r} is invalid: {fault.node!r} is not a node of this run "
                              f"({', '.join(overrides)})")
-    simulated = "vehicle_simulator" in overrides
-    children = {name: process(runtime.get(name) if isinstance(runtime, Mapping) else runtime) for name in overrides}
-    runtimes = {name: env["MOOSE_RUNTIME"] for name, (_python, env) in children.items()}
-    # the monitor: on the nodes' runtime when this interpreter can run it, else (and for a mixed graph) on Cyclone
-    runtimes[MONITOR_NAME] = "rclpy" if set(runtimes.values()) == {"rclpy"} and not rclpy_missing() else "dds"
-    # what the nodes run with: the file, then the values given to every node (timing, friction belief, --set)
-    shared = {key: value for key, value in params.items() if "." in key}
-    monitor = Monitor(scenario, scenario.configure(with_overrides(load_config(params_file, reader=None), shared)))
-    node = create_node(MONITOR_NAME, overrides={"use_sim_time": False}, runtime=runtimes[MONITOR_NAME])
-    recorder = live = None
-    try:
-        check_domain(node)
-        monitor.attach(node)
-        run = RunParameters(monitor.config, scenario, planner, seed)  # kept in the bag (moose bag replan uses it)
-        recorder = Recorder(node, bag, parameters=run) if bag is not None else None  # an unusable path stops here
-        if foxglove is not None:
-            from .live import LiveView
+    run = Run(scenario, planner, seed, rate, lockstep, tuple(faults), params_file)
+    supervisor = Supervisor(run, overrides, params, runtime, out)
+    supervisor.open(bag, foxglove)
+    with supervisor.signals_stop_the_run():
+        try:
+            supervisor.run(duration)
+        finally:
+            supervisor.close()
+    return supervisor.summary()
 
-            live = LiveView(node, host=foxglove[0], port=foxglove[1])
-            out.write(f"[launch] Foxglove live view on {live.url}\n")
-    except Exception:
-        if recorder is not None:
-            recorder.close()
-        node.shutdown()
-        raise
-    procs: dict[str, subprocess.Popen] = {}
-    last_lines: dict[str, list[str]] = {}
-    lock = threading.Lock()
 
-    def say(text: str) -> None:
-        with lock:
-            out.write(f"[launch] {text}\n")
-            out.flush()
+@dataclasses.dataclass(frozen=True)
+class Run:
+    """What one launch runs: the scenario, the planner, the seed, the pace and the faults."""
 
-    def stream(name: str, proc: subprocess.Popen) -> None:
-        assert proc.stdout is not None
-        for line in proc.stdout:
-            with lock:
-                out.write(f"[{name}] {line}")
-                out.flush()
-                last_lines[name] = (last_lines.get(name, []) + [line.rstrip()])[-3:]
+    scenario: Scenario
+    planner: PlannerMode
+    seed: int
+    rate: float
+    """Simulated seconds per wall-clock second (not used in lockstep)."""
+    lockstep: bool
+    faults: tuple[Fault, ...]
+    params_file: Optional[str]
 
-    log = monitor.log
-    exits: dict[str, int] = {}
-    ends: dict[str, str] = {}
-    stop = threading.Event()
-    interrupted: list[str] = []
 
-    def on_signal(signum: int, _frame: Any) -> None:
-        interrupted.append(signal.Signals(signum).name)
-        stop.set()
+class Supervisor:
+    """One run of the graph: owns the node processes, the monitor (:class:`moose_ros.monitor.Monitor`) and its
+    DDS node, the fault injector, the bag recorder and the live view, and decides when and why the run ends.
 
-    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)} \
-        if threading.current_thread() is threading.main_thread() else {}
-    injector = FaultInjector(faults, procs, rate, log, say, lockstep=lockstep)
-    silent: set[str] = set()
-    cut_short = ""
-    try:
-        for name, given in overrides.items():
-            python, env = children[name]
+    Its life: :meth:`open` (the monitor's node, the domain check, the recorder), :meth:`run` (start the nodes,
+    watch them until the run ends), :meth:`close` (stop everything, always), :meth:`summary`."""
+
+    def __init__(self, run: Run, overrides: dict[str, dict[str, Any]], params: Mapping[str, Any],
+                 runtime: Union[None, str, Mapping[str, str]], out: TextIO) -> None:
+        self.run_, self.overrides, self.out = run, overrides, out
+        self.simulated = "vehicle_simulator" in overrides
+        self.children = {name: process(runtime.get(name) if isinstance(runtime, Mapping) else runtime)
+                         for name in overrides}
+        self.runtimes = {name: env["MOOSE_RUNTIME"] for name, (_python, env) in self.children.items()}
+        # the monitor: on the nodes' runtime when this interpreter can run it, else (and for a mixed graph) on Cyclone
+        self.runtimes[MONITOR_NAME] = ("rclpy" if set(self.runtimes.values()) == {"rclpy"} and not rclpy_missing()
+                                       else "dds")
+        # what the nodes run with: the file, then the values given to every node (timing, friction belief, --set)
+        shared = {key: value for key, value in params.items() if "." in key}
+        config = run.scenario.configure(with_overrides(load_config(run.params_file, reader=None), shared))
+        self.monitor = Monitor(run.scenario, config)
+        self.log = self.monitor.log
+        self.procs: dict[str, subprocess.Popen[str]] = {}
+        self.last_lines: dict[str, list[str]] = {}
+        """Each node's last three lines of output (a node that fails to start is reported with them)."""
+        self.exits: dict[str, int] = {}
+        self.ends: dict[str, str] = {}
+        """How each node ended, in words (``finished``, ``stopped``, ``died (…)``, ``failed to start (…)``)."""
+        self.silent: set[str] = set()
+        """Nodes silent on /diagnostics beyond the deadline (reported once per silence)."""
+        self.interrupted: list[str] = []
+        """The signals that stopped the run."""
+        self.cut_short = ""
+        """Why the run ended before it was over (``""``: it was not cut short)."""
+        self.lock = threading.Lock()
+        self.stop = threading.Event()
+        self.injector = FaultInjector(run.faults, self.procs, run.rate, self.log, self.say, lockstep=run.lockstep)
+        self.node: Any = None
+        self.recorder: Optional[Recorder] = None
+        self.live: Optional[LiveView] = None
+
+    def open(self, bag: Optional[Union[str, Path]], foxglove: Optional[tuple[str, int]]) -> None:
+        """The monitor's node, the domain check (:func:`check_domain`), the recorder of ``bag`` and the live view
+        on ``foxglove``: all before any node starts; what was opened is closed again if one of them fails."""
+        self.node = create_node(MONITOR_NAME, overrides={"use_sim_time": False}, runtime=self.runtimes[MONITOR_NAME])
+        try:
+            check_domain(self.node)
+            self.monitor.attach(self.node)
+            run = self.run_
+            if bag is not None:  # an unusable path stops here; the run's parameters are kept (moose bag replan)
+                self.recorder = Recorder(self.node, bag, parameters=RunParameters(
+                    self.monitor.config, run.scenario, run.planner, run.seed))
+            if foxglove is not None:
+                self.live = LiveView(self.node, host=foxglove[0], port=foxglove[1])
+                self.out.write(f"[launch] Foxglove live view on {self.live.url}\n")
+        except Exception:
+            if self.recorder is not None:
+                self.recorder.close()
+            self.node.shutdown()
+            raise
+
+    @contextlib.contextmanager
+    def signals_stop_the_run(self) -> Iterator[None]:
+        """SIGINT and SIGTERM end the run (it is then cut short) rather than the launcher, while in this block (in
+        the main thread only: Python handles signals there)."""
+        def on_signal(signum: int, _frame: Any) -> None:
+            self.interrupted.append(signal.Signals(signum).name)
+            self.stop.set()
+
+        previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)} \
+            if threading.current_thread() is threading.main_thread() else {}
+        try:
+            yield
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+
+    def say(self, text: str) -> None:
+        """A line of the launcher's own on ``out``."""
+        with self.lock:
+            self.out.write(f"[launch] {text}\n")
+            self.out.flush()
+
+    def run(self, duration: Optional[float]) -> None:
+        """Start the nodes and watch them until the run ends: the simulator finished or ended, a node failed to
+        start, a signal, or the time limit (``duration`` seconds of wall-clock time, else :meth:`time_allowed`)."""
+        self.start_nodes()
+        start = time.monotonic()
+        limit = start + (duration if duration is not None else self.time_allowed())
+        while not self.stop.is_set() and time.monotonic() < limit:
+            self.node.spin_once(0.05)
+            t_sim = self.monitor.sim_time
+            t_fault = t_sim if self.simulated else time.monotonic() - start
+            if t_fault is not None:
+                self.injector.poll(t_fault)
+            self.reap(t_sim)
+            if self.ended_by_nodes():
+                break
+            self.watch_heartbeats()
+            if self.monitor.finished:
+                limit = min(limit, time.monotonic() + 15.0)  # the simulator is closing down
+        else:
+            if self.stop.is_set():
+                self.cut_short = f"{self.interrupted[0] if self.interrupted else 'a signal'} to the launcher"
+            elif self.simulated and not self.monitor.finished:
+                self.cut_short = "the time limit of the run was reached"
+        for _ in range(10):  # let the last messages arrive
+            self.node.spin_once(0.02)
+
+    def start_nodes(self) -> None:
+        """Every node as ``python -m moose_ros.nodes NAME`` with its parameters, its output streamed."""
+        for name, given in self.overrides.items():
+            python, env = self.children[name]
             cmd = [python, "-m", "moose_ros.nodes", name]
-            if params_file:
-                cmd += ["--params", params_file]
+            if self.run_.params_file:
+                cmd += ["--params", self.run_.params_file]
             for key, value in given.items():
                 cmd += ["--param", f"{key}={json.dumps(value)}"]
             proc = spawn(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-            procs[name] = proc
-            threading.Thread(target=stream, args=(name, proc), daemon=True).start()
-        start = time.monotonic()
-        planned = scenario.lead_time + scenario.duration
-        # with the simulator: its run at ``rate`` plus its start-up (it waits up to a minute for the nodes); without
-        # (the car): the planned run on the wall clock
-        if lockstep:  # as fast as the graph goes; a graph that stops going ends itself (lockstep_stuck)
-            limit = start + (duration if duration is not None else planned / LOCKSTEP_MIN_RATE + 60.0 + STUCK_TIMEOUT)
-        else:
-            limit = start + (duration if duration is not None else planned / rate + 60.0 if simulated else planned)
-        while not stop.is_set() and time.monotonic() < limit:
-            node.spin_once(0.05)
-            t_sim = monitor.sim_time
-            t_fault = t_sim if simulated else time.monotonic() - start
-            if t_fault is not None:
-                injector.poll(t_fault)
-            for name, proc in procs.items():
-                code = proc.poll()
-                if code is None or name in exits:
-                    continue
-                exits[name] = code
-                if name not in log.announced:
-                    ends[name] = f"failed to start ({_status_text(code)})"
-                    detail = " | ".join(last_lines.get(name, [])) or "no output"
-                    log.add(t_sim, name, "failed_to_start", f"exited with {_status_text(code)} before it "
-                                                            f"announced itself: {detail}")
-                elif name == "vehicle_simulator" and code == 0 and monitor.finished:
-                    ends[name] = "finished"
+            self.procs[name] = proc
+            threading.Thread(target=self.stream, args=(name, proc), daemon=True).start()
+
+    def stream(self, name: str, proc: subprocess.Popen[str]) -> None:
+        """A node's output, each line prefixed with ``[name]`` (in a thread of its own, to the node's end)."""
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            with self.lock:
+                self.out.write(f"[{name}] {line}")
+                self.out.flush()
+                self.last_lines[name] = (self.last_lines.get(name, []) + [line.rstrip()])[-3:]
+
+    def time_allowed(self) -> float:
+        """Wall-clock seconds the run may take.  With the simulator: its run at ``rate`` plus its start-up (it waits
+        up to a minute for the nodes); in lockstep, as fast as the graph goes down to :data:`LOCKSTEP_MIN_RATE` (a
+        graph that stops going ends itself: lockstep_stuck); without a simulator (the car): the planned run."""
+        planned = self.run_.scenario.lead_time + self.run_.scenario.duration
+        if self.run_.lockstep:
+            return planned / LOCKSTEP_MIN_RATE + 60.0 + STUCK_TIMEOUT
+        return planned / self.run_.rate + 60.0 if self.simulated else planned
+
+    def reap(self, t_sim: Optional[float]) -> None:
+        """Record each node that exited since the last look: how it ended, and an incident unless it finished."""
+        for name, proc in self.procs.items():
+            code = proc.poll()
+            if code is None or name in self.exits:
+                continue
+            self.exits[name] = code
+            if name not in self.log.announced:
+                self.ends[name] = f"failed to start ({_status_text(code)})"
+                detail = " | ".join(self.last_lines.get(name, [])) or "no output"
+                self.log.add(t_sim, name, "failed_to_start", f"exited with {_status_text(code)} before it "
+                                                             f"announced itself: {detail}")
+            elif name == "vehicle_simulator" and code == 0 and self.monitor.finished:
+                self.ends[name] = "finished"
+            else:
+                self.ends[name] = f"died ({_status_text(code)})"
+                self.log.add(t_sim, name, "died", f"exited with {_status_text(code)} during the run"
+                             + (" (the injected fault)" if name in self.injector.killed else ""))
+                self.say(f"node {name} exited with status {code}; the graph keeps running")
+
+    def ended_by_nodes(self) -> bool:
+        """Whether the nodes ended the run: one failed to start, or the simulator ended (cut short unless it had
+        finished)."""
+        failed = [n for n, e in self.ends.items() if e.startswith("failed to start")]
+        if failed:
+            self.cut_short = f"{', '.join(failed)} failed to start"
+            return True
+        if "vehicle_simulator" in self.exits:
+            if not self.monitor.finished:
+                self.cut_short = "the simulator ended before the run did"
+            return True
+        return False
+
+    def watch_heartbeats(self) -> None:
+        """A running node silent on /diagnostics for longer than the topic's deadline (on its own clock: simulated
+        time for the nodes on ``use_sim_time``, the wall clock for the others) is a ``stalled`` incident, once per
+        silence."""
+        deadline = DIAGNOSTICS.deadline
+        assert deadline is not None
+        now_wall, now_sim = time.monotonic(), self.monitor.sim_time
+        for name in self.procs:
+            if name in self.exits or name not in self.monitor.heard:
+                continue
+            wall, sim = self.monitor.heard[name]
+            on_sim = bool(self.overrides[name].get("use_sim_time"))
+            if on_sim and (now_sim is None or sim is None):
+                continue
+            quiet = (now_sim - sim) if on_sim else (now_wall - wall)
+            if quiet > deadline and name not in self.silent:
+                self.silent.add(name)
+                self.log.add(now_sim, name, "stalled", f"silent on /diagnostics for {quiet:.1f} s "
+                                                       f"({'simulated' if on_sim else 'wall-clock'} time)")
+            elif quiet <= deadline:
+                self.silent.discard(name)
+
+    def close(self) -> None:
+        """End the run: stalled nodes continue, every node stops (:meth:`stop_children`), the live view, the
+        monitor's node and the recorder close."""
+        self.injector.release()
+        self.stop_children()
+        if self.live is not None:
+            self.live.close()
+        self.node.shutdown()
+        if self.recorder is not None:
+            self.recorder.close()
+
+    def stop_children(self) -> None:
+        """SIGCONT and SIGTERM to every running node, SIGKILL after :data:`STOP_GRACE`; the monitor keeps listening
+        meanwhile (the nodes' final statuses carry their final counters)."""
+        running = [name for name, proc in self.procs.items() if proc.poll() is None and name not in self.exits]
+        for name in running:
+            for sig in (signal.SIGCONT, signal.SIGTERM):
+                try:
+                    self.procs[name].send_signal(sig)
+                except ProcessLookupError:
+                    pass
+        deadline = time.monotonic() + STOP_GRACE
+        while time.monotonic() < deadline and any(self.procs[n].poll() is None for n in running):
+            try:
+                self.node.spin_once(0.05)
+            except Exception:  # noqa: BLE001 - the monitor may be gone on an error path; the children still stop
+                time.sleep(0.05)
+        for name, proc in self.procs.items():
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+                if name in running:
+                    self.ends[name] = f"did not stop within {STOP_GRACE:g} s of SIGTERM: killed"
+                    self.log.add(self.monitor.sim_time, name, "died", self.ends[name])
+            code = proc.returncode
+            self.exits.setdefault(name, code)
+            if name in running and name not in self.ends:
+                if code == 0:
+                    self.ends[name] = "stopped"
                 else:
-                    ends[name] = f"died ({_status_text(code)})"
-                    log.add(t_sim, name, "died", f"exited with {_status_text(code)} during the run"
-                            + (" (the injected fault)" if name in injector.killed else ""))
-                    say(f"node {name} exited with status {code}; the graph keeps running")
-            failed = [n for n, e in ends.items() if e.startswith("failed to start")]
-            if failed:
-                cut_short = f"{', '.join(failed)} failed to start"
-                break
-            if "vehicle_simulator" in exits:
-                if not monitor.finished:
-                    cut_short = "the simulator ended before the run did"
-                break
-            _watch_heartbeats(monitor, procs, exits, overrides, silent)
-            if monitor.finished:
-                limit = min(limit, time.monotonic() + 15.0)  # the simulator is closing down
-        else:
-            if stop.is_set():
-                cut_short = f"{interrupted[0] if interrupted else 'a signal'} to the launcher"
-            elif simulated and not monitor.finished:
-                cut_short = "the time limit of the run was reached"
-        for _ in range(10):  # let the last messages arrive
-            node.spin_once(0.02)
-    finally:
-        injector.release()
-        _stop_children(procs, exits, ends, log, node, monitor)
-        if live is not None:
-            live.close()
-        node.shutdown()
-        if recorder is not None:
-            recorder.close()
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-    summary = _summary(monitor, planner, seed, None if lockstep else rate, exits, ends, faults, cut_short,
-                       interrupted)
-    summary["lockstep"] = lockstep
-    summary["runtime"] = runtimes
-    summary["bag_error"] = recorder.error if recorder is not None else None  # the recording, not the run
-    return summary
+                    self.ends[name] = f"did not stop cleanly ({_status_text(code)})"
+                    self.log.add(self.monitor.sim_time, name, "died", self.ends[name])
+
+    def summary(self) -> dict[str, Any]:
+        """The run's summary (see :func:`launch`), after the incidents only the end tells are recorded: the run
+        cut short, the deadline misses the nodes counted, a rate not held."""
+        self.record_end_incidents()
+        run, monitor = self.run_, self.monitor
+        summary = summarize(monitor.result(run.planner, run.seed))
+        if self.cut_short:
+            if summary["outcome"] in ("clear", "stopped_short"):  # never a success from a run cut short
+                summary["outcome"], summary["complete"] = "incomplete", False
+            summary["reason"] = f"the run was cut short ({self.cut_short}); {summary['reason']}"
+        last = monitor.odom[-1] if monitor.odom else None
+        counters = sorted(self.log.counters.items())
+        summary.update(
+            node_exits=self.exits,
+            node_status=self.ends,
+            diagnostics={k: {"level": v[0], "message": v[1]} for k, v in monitor.diagnostics.items()},
+            odom_samples=len(monitor.odom),
+            final_position_m=None if last is None else [last[1], last[2]],
+            final_speed_mps=None if last is None else math.hypot(last[4], last[5]),
+            incidents=[i.as_dict() for i in self.log.incidents],
+            degraded=self.log.degraded,
+            deadline_misses={n: int(c.get("deadline_misses", 0)) for n, c in counters},
+            stalls={n: int(c.get("stalls", 0)) for n, c in counters},
+            real_time_factor={"requested": None if run.lockstep else run.rate,
+                              "achieved": monitor.real_time_factor()},
+            interrupted=self.interrupted[0] if self.interrupted else None,
+            faults=[str(f) for f in run.faults],
+            invalid_messages=monitor.invalid,
+        )
+        summary["exit_status"] = exit_status(summary["outcome"], summary["degraded"], summary["interrupted"])
+        summary["lockstep"] = run.lockstep
+        summary["runtime"] = self.runtimes
+        summary["bag_error"] = self.recorder.error if self.recorder is not None else None  # the recording, not the run
+        return summary
+
+    def record_end_incidents(self) -> None:
+        """The incidents of the whole run: cut short, deadline misses (from the nodes' final counters), the rate
+        not held (below :data:`moose_ros.incidents.RATE_TOLERANCE` of the requested one; not in lockstep)."""
+        if self.cut_short:
+            self.log.add(self.monitor.sim_time, "launch", "cut_short", self.cut_short)
+        for name, counters in sorted(self.log.counters.items()):
+            misses = int(counters.get("deadline_misses", 0))
+            if misses:
+                self.log.add(None, name, "deadline_missed", f"{misses} deadline misses (longest executor gap "
+                                                            f"{counters.get('longest_gap_ms', 0):.0f} ms)")
+        achieved = self.monitor.real_time_factor()
+        rate = self.run_.rate
+        if not self.run_.lockstep and achieved is not None and achieved < RATE_TOLERANCE * rate:
+            self.log.add(None, "vehicle_simulator", "rate_not_held",
+                         f"--rate {rate:g} not held: achieved {achieved:.2f} (below {RATE_TOLERANCE:g} × requested)")
 
 
 def _status_text(code: int) -> str:
@@ -427,102 +517,3 @@ def _status_text(code: int) -> str:
         except ValueError:
             return f"signal {-code}"
     return f"exit status {code}"
-
-
-def _watch_heartbeats(monitor: Monitor, procs: dict[str, subprocess.Popen], exits: dict[str, int],
-                      overrides: dict[str, dict[str, Any]], silent: set[str]) -> None:
-    """A running node silent on /diagnostics for longer than the topic's deadline (on its own clock: simulated
-    time for the nodes on ``use_sim_time``, the wall clock for the others) is a ``stalled`` incident, once per
-    silence."""
-    deadline = DIAGNOSTICS.deadline
-    assert deadline is not None
-    now_wall, now_sim = time.monotonic(), monitor.sim_time
-    for name in procs:
-        if name in exits or name not in monitor.heard:
-            continue
-        wall, sim = monitor.heard[name]
-        on_sim = bool(overrides[name].get("use_sim_time"))
-        if on_sim and (now_sim is None or sim is None):
-            continue
-        quiet = (now_sim - sim) if on_sim else (now_wall - wall)
-        if quiet > deadline and name not in silent:
-            silent.add(name)
-            monitor.log.add(now_sim, name, "stalled", f"silent on /diagnostics for {quiet:.1f} s "
-                                                      f"({'simulated' if on_sim else 'wall-clock'} time)")
-        elif quiet <= deadline:
-            silent.discard(name)
-
-
-def _stop_children(procs: dict[str, subprocess.Popen], exits: dict[str, int], ends: dict[str, str],
-                   log: IncidentLog, node: Any, monitor: Monitor) -> None:
-    """SIGCONT and SIGTERM to every running node, SIGKILL after :data:`STOP_GRACE`; the monitor keeps listening
-    meanwhile (the nodes' final statuses carry their final counters)."""
-    running = [name for name, proc in procs.items() if proc.poll() is None and name not in exits]
-    for name in running:
-        for sig in (signal.SIGCONT, signal.SIGTERM):
-            try:
-                procs[name].send_signal(sig)
-            except ProcessLookupError:
-                pass
-    deadline = time.monotonic() + STOP_GRACE
-    while time.monotonic() < deadline and any(procs[n].poll() is None for n in running):
-        try:
-            node.spin_once(0.05)
-        except Exception:  # noqa: BLE001 - the monitor may be gone on an error path; the children still stop
-            time.sleep(0.05)
-    for name, proc in procs.items():
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-            if name in running:
-                ends[name] = f"did not stop within {STOP_GRACE:g} s of SIGTERM: killed"
-                log.add(monitor.sim_time, name, "died", ends[name])
-        code = proc.returncode
-        exits.setdefault(name, code)
-        if name in running and name not in ends:
-            if code == 0:
-                ends[name] = "stopped"
-            else:
-                ends[name] = f"did not stop cleanly ({_status_text(code)})"
-                log.add(monitor.sim_time, name, "died", ends[name])
-
-
-def _summary(monitor: Monitor, planner: PlannerMode, seed: int, rate: Optional[float], exits: dict[str, int],
-             ends: dict[str, str],
-             faults: Sequence[Fault], cut_short: str, interrupted: list[str]) -> dict[str, Any]:
-    log = monitor.log
-    if cut_short:
-        log.add(monitor.sim_time, "launch", "cut_short", cut_short)
-    for name, counters in sorted(log.counters.items()):
-        misses = int(counters.get("deadline_misses", 0))
-        if misses:
-            log.add(None, name, "deadline_missed", f"{misses} deadline misses (longest executor gap "
-                                                   f"{counters.get('longest_gap_ms', 0):.0f} ms)")
-    achieved = monitor.real_time_factor()
-    if rate is not None and achieved is not None and achieved < RATE_TOLERANCE * rate:
-        log.add(None, "vehicle_simulator", "rate_not_held",
-                f"--rate {rate:g} not held: achieved {achieved:.2f} (below {RATE_TOLERANCE:g} × requested)")
-    summary = summarize(monitor.result(planner, seed))
-    if cut_short:
-        if summary["outcome"] in ("clear", "stopped_short"):  # never a success from a run cut short
-            summary["outcome"], summary["complete"] = "incomplete", False
-        summary["reason"] = f"the run was cut short ({cut_short}); {summary['reason']}"
-    last = monitor.odom[-1] if monitor.odom else None
-    summary.update(
-        node_exits=exits,
-        node_status=ends,
-        diagnostics={k: {"level": v[0], "message": v[1]} for k, v in monitor.diagnostics.items()},
-        odom_samples=len(monitor.odom),
-        final_position_m=None if last is None else [last[1], last[2]],
-        final_speed_mps=None if last is None else math.hypot(last[4], last[5]),
-        incidents=[i.as_dict() for i in log.incidents],
-        degraded=log.degraded,
-        deadline_misses={n: int(c.get("deadline_misses", 0)) for n, c in sorted(log.counters.items())},
-        stalls={n: int(c.get("stalls", 0)) for n, c in sorted(log.counters.items())},
-        real_time_factor={"requested": rate, "achieved": achieved},
-        interrupted=interrupted[0] if interrupted else None,
-        faults=[str(f) for f in faults],
-        invalid_messages=monitor.invalid,
-    )
-    summary["exit_status"] = exit_status(summary["outcome"], summary["degraded"], summary["interrupted"])
-    return summary

@@ -71,7 +71,7 @@ MATCH_RETRY = 0.02
 BUS_POLL = 0.001
 """Wall-clock period (s) at which a lockstep node on the CAN bus reads its frames (no message wakes it for them)."""
 MONITORED: tuple[str, ...] = tuple(t.name for t in (ODOM, STEERING, PLAN_MPC, BLEND, THREAT, DIAGNOSTICS))
-"""What the launcher's monitor reads (:meth:`moose_ros.launch.Monitor.attach`): with ``lockstep_monitor`` a lockstep
+"""What the launcher's monitor reads (:meth:`moose_ros.monitor.Monitor.attach`): with ``lockstep_monitor`` a lockstep
 publisher of these waits for its reader as for the graph's, so the summary misses nothing of tick 0."""
 STUCK_TIMEOUT = 90.0
 """Wall-clock seconds the simulator waits for one tick before it ends the run with ``lockstep_stuck``."""
