@@ -101,8 +101,9 @@ class SolverCaps:
     max_iter: int = 10
     """Maximum number of SQP iterations."""
     max_fun_evals: int = 100
-    """Maximum number of cost evaluations (``projected_newton``: guaranteed through
-    ``MpcParams.max_iter_ls``; ``paper_sqp``: every evaluation counted, finite differences included)."""
+    """Maximum number of cost evaluations (``projected_newton``: enough for every Newton search through
+    ``MpcParams.max_iter_ls``, its projected-gradient fallback may reach it; ``paper_sqp``: every evaluation counted,
+    finite differences included)."""
     constraint_tol: float = 1e-3
     """Primal infeasibility tolerance."""
     optimality_tol: float = 1e-3
@@ -191,7 +192,7 @@ class MpcParams:
         check("max_iter_ls", self.max_iter_ls,
               lambda v: isinstance(v, int) and v >= 0 and self.caps.max_iter * (1 + v) + 1 <= self.caps.max_fun_evals,
               "an integer ≥ 0 with max_iter (1 + max_iter_ls) + 1 ≤ caps.max_fun_evals "
-              "(an iteration evaluates the cost at most 1 + max_iter_ls times)")
+              "(a line search evaluates the cost at most 1 + max_iter_ls times)")
 
 
 MsfProfile = Literal["scurve", "nu_scaled"]
