@@ -48,12 +48,11 @@ import numpy as np
 from .ccompile import bind, compile_function
 from .params import VehicleParams
 from .schema import ObserverParams
-from .signals import EpsSample, GpsSample, ImuSample, StateEstimate, WheelSpeedSample
+from .signals import EpsSample, GpsSample, ImuSample, Sample, StateEstimate, WheelSpeedSample
 from .state import GAMMA, N_MOTION, THETA, VX, VY, X, Y
 from .tire import Axles, lateral_forces
 from .vehicle import symbolic_params, vehicle_vector
 
-Sample = Union[ImuSample, GpsSample, WheelSpeedSample, EpsSample]
 _FIELDS: dict[type, tuple[str, ...]] = {
     ImuSample: ("t", "ax", "ay", "yaw_rate"),
     WheelSpeedSample: ("t", "omega_rl", "omega_rr"),

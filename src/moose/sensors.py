@@ -28,16 +28,13 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections import deque
-from typing import Union
 
 import numpy as np
 
 from .params import VehicleParams
 from .schema import SensorParams
-from .signals import EpsSample, GpsSample, ImuSample, WheelSpeedSample
+from .signals import EpsSample, GpsSample, ImuSample, Sample, WheelSpeedSample
 from .state import DELTA, GAMMA, OMEGA_RL, OMEGA_RR, THETA, VX, VY, X, Y
-
-Sample = Union[ImuSample, GpsSample, WheelSpeedSample, EpsSample]
 
 _TICK_TOLERANCE = 1e-6
 """Fraction of a sample period by which a call may precede a sample's due time (float round-off of k · dt)."""

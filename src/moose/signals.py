@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from typing import Any, Literal
+from typing import Any, Literal, Union
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -241,3 +241,7 @@ class EpsSample:
 
     t: float
     delta: float
+
+
+Sample = Union[ImuSample, GpsSample, WheelSpeedSample, EpsSample]
+"""A sensor sample of any of the car's sensors (what the sensor model emits and the observer fuses)."""

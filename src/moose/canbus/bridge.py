@@ -24,18 +24,16 @@ The python-can I/O around the core is :class:`moose.canbus.runner.BridgeRunner`.
 from __future__ import annotations
 
 import math
-from typing import Any, Optional, Union
+from typing import Any, Optional
 
 import can
 
 from moose.params import ParamError
-from moose.signals import EpsSample, GpsSample, ImuSample, WheelSpeedSample
+from moose.signals import EpsSample, GpsSample, ImuSample, Sample, WheelSpeedSample
 
 from .codec import Codec, cycle_time
 from .health import BusHealth, BusState, HealthParams
 from .safety import Command, CommandGuard, GuardParams
-
-Sample = Union[ImuSample, GpsSample, WheelSpeedSample, EpsSample]
 
 HEARTBEAT_STATE = {"commanding": 0, "safe_state": 1, "fault": 2}
 GPS_PAIR_WINDOW = 0.1

@@ -40,8 +40,9 @@ from typing import Any, Callable, Optional
 import can
 
 from moose.params import ParamError, check
+from moose.signals import Sample
 
-from .bridge import BridgeCore, Sample
+from .bridge import BridgeCore
 from .bus import BITRATE, BusLink, BusParams
 from .health import BusState, HealthParams
 from .safety import Command, GuardParams, GuardState

@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Callable, Optional
 
+from .runtime.base import Handle, NodeBase, Publisher
 from .runtime.names import CLOCK_TOPIC, CLOCK_TYPE
 from .runtime.qos import (
     QOS_CLOCK,
@@ -141,11 +142,11 @@ class Topic:
     def subscription_qos(self) -> Qos:
         return self.reader_qos or self.qos
 
-    def publisher(self, rt: Any) -> Any:
+    def publisher(self, rt: NodeBase) -> Publisher:
         """A publisher of this topic on runtime node ``rt``."""
         return rt.publisher(self.type, self.name, self.qos)
 
-    def subscription(self, rt: Any, callback: Callable[[Any], None]) -> Any:
+    def subscription(self, rt: NodeBase, callback: Callable[[Any], None]) -> Handle:
         """A subscription to this topic on runtime node ``rt``, with the subscribers' QoS."""
         return rt.subscription(self.type, self.name, callback, self.subscription_qos)
 
@@ -157,7 +158,7 @@ class Topic:
         base = self.subscription_qos if self.qos.transient_local else self.qos
         return Qos(reliable=self.qos.reliable, depth=max(base.depth, 100), transient_local=self.qos.transient_local)
 
-    def tool_subscription(self, rt: Any, callback: Callable[[Any], None]) -> Any:
+    def tool_subscription(self, rt: NodeBase, callback: Callable[[Any], None]) -> Handle:
         """A subscription of a tool (monitor, recorder) with :attr:`tool_qos`."""
         return rt.subscription(self.type, self.name, callback, self.tool_qos)
 

@@ -55,7 +55,7 @@ from .monitor import Monitor
 from .parameters import check_parameter_file, node_parameters, parameter_names
 from .process import spawn
 from .runtime import create_node, process, rclpy_missing
-from .runtime.base import set_dotted
+from .runtime.base import NodeBase, set_dotted
 
 STOP_GRACE = 5.0
 """Seconds a node has to end after SIGTERM before it gets SIGKILL."""
@@ -138,7 +138,7 @@ def node_overrides(graph: str, planner: str, params: Optional[dict[str, Any]] = 
     return out
 
 
-def check_domain(node: Any, wait: float = DOMAIN_CHECK) -> None:
+def check_domain(node: NodeBase, wait: float = DOMAIN_CHECK) -> None:
     """Refuse to start a graph in a DDS domain where nodes of another moose graph run (a run whose launcher
     was killed, or another launch): their messages would mix with this run's.  Listens ``wait`` seconds
     to ``ros_discovery_info`` through ``node``; a :class:`ParamError` names the nodes found."""
@@ -224,8 +224,9 @@ class Supervisor:
     """One run of the graph: owns the node processes, the monitor (:class:`moose_ros.monitor.Monitor`) and its
     DDS node, the fault injector, the bag recorder and the live view, and decides when and why the run ends.
 
-    Its life: :meth:`open` (the monitor's node, the domain check, the recorder), :meth:`run` (start the nodes,
-    watch them until the run ends), :meth:`close` (stop everything, always), :meth:`summary`."""
+    Its life: the constructor (the monitor and its node), :meth:`open` (the domain check, the recorder, the live
+    view), :meth:`run` (start the nodes, watch them until the run ends), :meth:`close` (stop everything, always),
+    :meth:`summary`."""
 
     def __init__(self, run: Run, overrides: dict[str, dict[str, Any]], params: Mapping[str, Any],
                  runtime: Union[None, str, Mapping[str, str]], out: TextIO) -> None:
@@ -257,14 +258,14 @@ class Supervisor:
         self.lock = threading.Lock()
         self.stop = threading.Event()
         self.injector = FaultInjector(run.faults, self.procs, run.rate, self.log, self.say, lockstep=run.lockstep)
-        self.node: Any = None
         self.recorder: Optional[Recorder] = None
         self.live: Optional[LiveView] = None
+        self.node = create_node(MONITOR_NAME, overrides={"use_sim_time": False}, runtime=self.runtimes[MONITOR_NAME])
+        """The monitor's node (created last: nothing else here holds a resource that needs closing)."""
 
     def open(self, bag: Optional[Union[str, Path]], foxglove: Optional[tuple[str, int]]) -> None:
-        """The monitor's node, the domain check (:func:`check_domain`), the recorder of ``bag`` and the live view
+        """The domain check on the monitor's node (:func:`check_domain`), the recorder of ``bag`` and the live view
         on ``foxglove``: all before any node starts; what was opened is closed again if one of them fails."""
-        self.node = create_node(MONITOR_NAME, overrides={"use_sim_time": False}, runtime=self.runtimes[MONITOR_NAME])
         try:
             check_domain(self.node)
             self.monitor.attach(self.node)

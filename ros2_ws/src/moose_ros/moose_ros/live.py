@@ -16,6 +16,7 @@ from typing import Any, Callable
 from moose.params import ParamError
 
 from .graph import CLOCK, TOPICS, Topic
+from .runtime.base import NodeBase
 
 DEFAULT_PORT = 8765
 """Foxglove's default WebSocket port."""
@@ -25,7 +26,7 @@ DEFAULT_HOST = "127.0.0.1"
 class LiveView:
     """A Foxglove WebSocket server fed by runtime node ``node`` (its subscriptions use the tools' QoS)."""
 
-    def __init__(self, node: Any, port: int = DEFAULT_PORT, host: str = DEFAULT_HOST) -> None:
+    def __init__(self, node: NodeBase, port: int = DEFAULT_PORT, host: str = DEFAULT_HOST) -> None:
         import foxglove
 
         from .interfaces import typestore

@@ -24,6 +24,7 @@ from . import convert as cv
 from .graph import BLEND, DIAGNOSTICS, ODOM, PLAN_MPC, STEERING, THREAT, TOPICS
 from .incidents import IncidentLog
 from .lockstep import MONITORED
+from .runtime.base import NodeBase
 
 
 @dataclasses.dataclass
@@ -49,7 +50,7 @@ class Monitor:
     invalid: int = 0
     """Invalid plans and threats dropped (moose_ros.convert validates them)."""
 
-    def attach(self, node: Any) -> None:  # a tool that must not miss a sample (graph.Topic.tool_qos)
+    def attach(self, node: NodeBase) -> None:  # a tool that must not miss a sample (graph.Topic.tool_qos)
         callbacks = {ODOM.name: self.on_odom, STEERING.name: lambda m: setattr(self, "delta", m.delta),
                      PLAN_MPC.name: self.on_mpc, THREAT.name: self.on_threat, DIAGNOSTICS.name: self.on_diagnostics,
                      BLEND.name: lambda m: self.weights.__setitem__(cv.time_of(m), m.weight_mpc)}

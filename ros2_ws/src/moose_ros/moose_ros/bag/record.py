@@ -21,6 +21,7 @@ from ..graph import (
     THREAT,
     TOPICS,
 )
+from ..runtime.base import NodeBase
 from .errors import BagError
 from .params import RunParameters
 from .writer import BagWriter
@@ -41,7 +42,7 @@ class Recorder:
     POLL_PERIOD = 0.05
     """Period of the timer that closes chunks (s, wall clock)."""
 
-    def __init__(self, node: Any, path: str | Path, topics: Optional[Sequence[str]] = None,
+    def __init__(self, node: NodeBase, path: str | Path, topics: Optional[Sequence[str]] = None,
                  parameters: Optional[RunParameters] = None) -> None:
         chosen = list(topics) if topics else list(TOPICS)
         unknown = [t for t in chosen if t not in TOPICS]

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import time
 from collections import Counter
-from typing import Any, Callable, Iterable, Optional
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Optional
 
 from .. import convert as cv
 from ..graph import (
@@ -59,7 +59,11 @@ from ..lockstep import (
     tick_of,
 )
 from ..parameters import node_parameters
+from ..runtime.base import Handle, NodeBase, Publisher
 from ..runtime.qos import Qos
+
+if TYPE_CHECKING:  # imported in GraphNode.table only: the nodes that build no table do not load it
+    from moose.maneuver import MaxSteeringTable
 
 OK, WARN, ERROR = 0, 1, 2
 """diagnostic_msgs/DiagnosticStatus levels."""
@@ -115,7 +119,7 @@ class GraphNode:
 
     name = "node"
 
-    def __init__(self, rt: Any) -> None:
+    def __init__(self, rt: NodeBase) -> None:
         self.rt = rt
         self.config, self.params = node_parameters(self.name, rt.parameters)
         if hasattr(self.params, "load_scenario"):  # the simulated road: the scenario's μ, when it sets one
@@ -149,7 +153,7 @@ class GraphNode:
         self.join: Optional[TickJoin] = None
         self._handlers: dict[str, Callable[[Any], None]] = {}
         self._published: list[str] = []
-        self._pubs: list[Any] = []
+        self._pubs: list[tuple[Publisher, int]] = []
         nodes = tuple(getattr(self.params, "lockstep_nodes", ()))
         if nodes:  # lockstep (moose_ros.lockstep): supervision runs in each tick, not on a timer
             self.join = TickJoin(self.name, nodes)  # the inputs it reads join as the node subscribes
@@ -209,7 +213,7 @@ class GraphNode:
             return self.tick_time
         return self.rt.now() if getattr(self.rt, "use_sim_time", False) else time.monotonic()
 
-    def subscribe(self, topic: Topic, handler: Callable[[Any], None]) -> Any:
+    def subscribe(self, topic: Topic, handler: Callable[[Any], None]) -> Handle:
         """Subscribe to ``topic`` with its subscribers' QoS; ``handler`` gets the validated record
         (:data:`moose_ros.convert.RECORDS`), and each valid arrival is noted for :attr:`inputs`.  An invalid
         message never reaches ``handler`` and never raises (see the module docstring)."""
@@ -387,7 +391,7 @@ class GraphNode:
         self._published_level, self._published_stalls = level, self.stalls
         self._diag(cv.diagnostic_to_msg(self.rt, self.stamp_time(), self.name, level, message, values))
 
-    def table(self) -> Any:
+    def table(self) -> MaxSteeringTable:
         """The maximum steering table of the vehicle the stack believes in (the planning μ; detector, MSF planner)."""
         from moose.maneuver import MaxSteeringTable
 

@@ -15,7 +15,7 @@ marker, and the simulator steps only when they are on its side of the bus.
 from __future__ import annotations
 
 import time
-from typing import Any, Optional
+from typing import Optional
 
 from moose.canbus.bus import BusParams
 from moose.canbus.runner import BridgeParams, BridgeRunner
@@ -25,6 +25,7 @@ from moose.signals import ActuatorCommand
 
 from ..graph import ACTUATOR_COMMAND
 from ..lockstep import BUS, BUS_POLL
+from ..runtime.base import NodeBase
 from .base import GraphNode, sensor_publishers
 
 COMMAND_PERIOD = 0.01
@@ -36,7 +37,7 @@ class CanBridge(GraphNode):
 
     name = "can_bridge"
 
-    def __init__(self, rt: Any) -> None:
+    def __init__(self, rt: NodeBase) -> None:
         super().__init__(rt)
         p = self.params
         bus = BusParams(**{k: v for k, v in (("interface", p.can_interface), ("channel", p.can_channel),

@@ -1,13 +1,14 @@
 """``obstacle_detector``: state + visible danger zones → /perception/threat (τ, w, ν)."""
 from __future__ import annotations
 
-from typing import Any, Optional
+from typing import Optional
 
 from moose.detector import ObstacleDetector
 from moose.signals import StateEstimate
 
 from .. import convert as cv
 from ..graph import OBSTACLES, STATE, THREAT
+from ..runtime.base import NodeBase
 from .base import ERROR, GraphNode
 
 
@@ -16,7 +17,7 @@ class Detector(GraphNode):
 
     name = "obstacle_detector"
 
-    def __init__(self, rt: Any) -> None:
+    def __init__(self, rt: NodeBase) -> None:
         super().__init__(rt)
         self.detector = ObstacleDetector(self.config.detector, self.table())
         self.obstacles: list = []

@@ -2,11 +2,11 @@
 minimum-risk maneuver when the stack can no longer drive the car."""
 from __future__ import annotations
 
-from typing import Any, Optional
+from typing import Optional
 
 from moose.minimum_risk import ActuatorLimits, Command, MinimumRiskManeuver
 from moose.motion import MotionController
-from moose.signals import Reference, StateEstimate
+from moose.signals import EpsSample, Reference, StateEstimate
 from moose.state import STEER_RATE, TORQUE_RL, TORQUE_RR
 from moose.timing import SteeringPredictor
 
@@ -21,6 +21,7 @@ from ..graph import (
     WHEEL_SPEEDS,
     essential_upstream,
 )
+from ..runtime.base import NodeBase
 from .base import ERROR, WARN, GraphNode
 
 NEEDED = (STATE, REFERENCE, STEERING)
@@ -47,7 +48,7 @@ class Motion(GraphNode):
 
     name = "motion_controller"
 
-    def __init__(self, rt: Any) -> None:
+    def __init__(self, rt: NodeBase) -> None:
         super().__init__(rt)
         self.controller = MotionController(self.config.motion, self.config.model_vehicle)
         self.estimate: Optional[StateEstimate] = None
@@ -85,7 +86,7 @@ class Motion(GraphNode):
             if name in self.upstream:
                 self.health[name] = (level, message, self.clock())
 
-    def on_steering(self, sample: Any) -> None:
+    def on_steering(self, sample: EpsSample) -> None:
         self.delta, self.delta_stamp = sample.delta, sample.t
 
     def on_state(self, estimate: StateEstimate) -> None:

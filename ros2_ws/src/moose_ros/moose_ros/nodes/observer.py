@@ -2,15 +2,16 @@
 /tf at the IMU rate."""
 from __future__ import annotations
 
-from typing import Any, Optional
+from typing import Optional
 
 from moose.observer import StateObserver
-from moose.signals import StateEstimate
+from moose.signals import Sample, StateEstimate
 from moose.state import X
 from moose.vehicle import initial_state
 
 from .. import convert as cv
 from ..graph import GPS, IMU, STATE, STEERING, TF, WHEEL_SPEEDS
+from ..runtime.base import NodeBase
 from .base import ERROR, WARN, GraphNode
 
 
@@ -20,7 +21,7 @@ class Observer(GraphNode):
 
     name = "observer"
 
-    def __init__(self, rt: Any) -> None:
+    def __init__(self, rt: NodeBase) -> None:
         super().__init__(rt)
         scenario = self.params.load_scenario()
         start = initial_state(self.config.vehicle, x=scenario.start_x, vx=scenario.v_init)
@@ -29,7 +30,7 @@ class Observer(GraphNode):
         self.pub = self.publisher(STATE)
         self.pub_tf = self.publisher(TF)
         self.dropped = 0
-        self.batch: list[Any] = []
+        self.batch: list[Sample] = []
         """Lockstep: the samples the tick delivered, fused together at its end (``update_all``, as the loop)."""
         if self.lockstep:
             for topic in (IMU, GPS, WHEEL_SPEEDS, STEERING):
@@ -44,11 +45,11 @@ class Observer(GraphNode):
         speeds or the steering angle the estimate drifts): ERROR.  A late GPS fix only degrades (WARN)."""
         self.report_stale(stale, ERROR, {GPS.name: WARN})
 
-    def feed(self, sample: Any, publish: bool = False) -> None:
+    def feed(self, sample: Sample, publish: bool = False) -> None:
         if self.fuse([sample]) and publish:
             self.publish()
 
-    def fuse(self, samples: list[Any]) -> bool:
+    def fuse(self, samples: list[Sample]) -> bool:
         """Fuse ``samples`` in order; False if one was refused (out of order: transport reordering), which is
         counted, never fatal."""
         try:

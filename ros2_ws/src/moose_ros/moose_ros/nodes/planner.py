@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from typing import Any, Optional
+from typing import Optional
 
 import numpy as np
 
@@ -15,6 +15,7 @@ from moose.timing import AccelSchedule
 
 from .. import convert as cv
 from ..graph import BLEND, PLANS, STATE, THREAT
+from ..runtime.base import NodeBase
 from .base import ERROR, OK, WARN, GraphNode
 
 
@@ -24,7 +25,7 @@ class PlannerNode(GraphNode):
 
     kind = ""
 
-    def __init__(self, rt: Any) -> None:
+    def __init__(self, rt: NodeBase) -> None:
         super().__init__(rt)
         self.planner = self.make_planner()
         self.scenario = self.params.load_scenario()

@@ -3,14 +3,14 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 import numpy as np
 
 from moose.canbus.safety import CommandGuard, GuardParams, GuardState
 from moose.minimum_risk import ActuatorLimits, Command, MinimumRiskManeuver
 from moose.sensors import Sensors
-from moose.signals import ActuatorCommand, EpsSample, WheelSpeedSample
+from moose.signals import ActuatorCommand, EpsSample, Sample, WheelSpeedSample
 from moose.state import VX, X, Y
 from moose.timing import CommandHold, DelayLine
 from moose.vehicle import VehiclePlant, initial_state
@@ -19,6 +19,7 @@ from .. import convert as cv
 from ..faults import Fault
 from ..graph import ACTUATOR_COMMAND, CLOCK, DIAGNOSTICS, OBSTACLES, ODOM, TF
 from ..lockstep import BUS, BUS_POLL, MATCH_RETRY, ROOT, sensor_transit, tick_of
+from ..runtime.base import NodeBase
 from .base import ERROR, WARN, GraphNode, sensor_publishers
 
 
@@ -45,7 +46,7 @@ class TopicVehicleIo:
         """A command, computed at the simulator's current tick (in lockstep: the tick it was made for)."""
         self.hold.push(self.node.t, Command(c.steering_angle, c.steering_rate, c.torque_rl, c.torque_rr))
 
-    def send(self, sample: Any, t: float) -> None:
+    def send(self, sample: Sample, t: float) -> None:
         if isinstance(sample, EpsSample):
             self.guard.observe_angle(sample.delta)
         elif isinstance(sample, WheelSpeedSample):
@@ -95,7 +96,7 @@ class CanVehicleIo:
         if node.join is not None:
             node.join.add(BUS)
 
-    def send(self, sample: Any, t: float) -> None:
+    def send(self, sample: Sample, t: float) -> None:
         for frame in self.ecu.encode(sample, t):
             self.bus.send(frame)
             self.node.announce(BUS)
@@ -141,7 +142,7 @@ class VehicleSimulator(GraphNode):
 
     name = "vehicle_simulator"
 
-    def __init__(self, rt: Any) -> None:
+    def __init__(self, rt: NodeBase) -> None:
         super().__init__(rt)
         self.scenario = self.params.load_scenario()
         vehicle = self.config.vehicle  # the road's μ: the scenario's (GraphNode)
@@ -154,8 +155,9 @@ class VehicleSimulator(GraphNode):
         self.t = 0.0
         self.appeared = False
         self.finished = False
-        self.pub = {"clock": CLOCK.publisher(rt), "odom": self.publisher(ODOM), "tf": TF.publisher(rt),
-                    "obstacles": self.publisher(OBSTACLES)}
+        self.pub: dict[str, Callable[[Any], None]] = {
+            "clock": CLOCK.publisher(rt), "odom": self.publisher(ODOM), "tf": TF.publisher(rt),
+            "obstacles": self.publisher(OBSTACLES)}
         self.stepped = False
         """The plant has taken a step (its specific force is the IMU's)."""
         # the sensor path's delay (moose.timing): a sample handed over at t reaches the observer at t + d_s; on the

@@ -21,6 +21,7 @@ from moose.signals import PlanResult, StateEstimate, Threat
 
 from .. import convert as cv
 from ..graph import BLEND, MARKERS, PLAN_MPC, PLAN_MSF, PLANS, REFERENCE, STATE, THREAT
+from ..runtime.base import NodeBase
 from .base import ERROR, WARN, GraphNode
 
 
@@ -30,7 +31,7 @@ class WeightFbl(GraphNode):
 
     name = "weight_fbl"
 
-    def __init__(self, rt: Any) -> None:
+    def __init__(self, rt: NodeBase) -> None:
         super().__init__(rt)
         self.step = PlanningStep(self.config, planners=False)
         self.mode = self.step.mode

@@ -132,7 +132,7 @@ def process(runtime: Optional[str] = None, base: Optional[Mapping[str, str]] = N
 
 
 def create_node(name: str, params_file: Optional[str] = None, overrides: Optional[dict[str, Any]] = None,
-                namespace: Optional[str] = None, runtime: Optional[str] = None) -> Any:
+                namespace: Optional[str] = None, runtime: Optional[str] = None) -> NodeBase:
     """A node on ``runtime`` (default: :func:`backend`, from ``MOOSE_RUNTIME`` or what is importable).
 
     ``params_file``: a ROS 2 parameter YAML (``/**`` and the node's own section); ``overrides``:

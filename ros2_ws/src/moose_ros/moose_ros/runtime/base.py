@@ -1,4 +1,5 @@
-"""The node base class both backends share: name, namespace, parameters, logging, spin/shutdown life cycle."""
+"""The node base class both backends share: name, namespace, parameters, logging, spin/shutdown life cycle, and
+the node API each backend implements (publishers, subscriptions, timers, the clock, messages, the executor)."""
 from __future__ import annotations
 
 import contextlib
@@ -12,7 +13,7 @@ from typing import Any, Callable, Optional
 from moose.params import ParamError, check, read_ros_params
 
 from .names import check_node_name, normalise_namespace, resolve_topic
-from .qos import Qos
+from .qos import QOS_DEFAULT, Qos
 
 
 def flatten_params(params: dict[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -200,7 +201,52 @@ class NodeBase:
     def parameters(self) -> dict[str, Any]:
         return self._params
 
+    # -- messaging and the executor: what each backend implements -------------------
+    def publisher(self, type_name: str, topic: str, qos: Qos = QOS_DEFAULT) -> Publisher:
+        """A publisher of ``type_name`` (``pkg/msg/Name``) on ``topic`` (resolved against the node's namespace)."""
+        raise NotImplementedError
+
+    def subscription(self, type_name: str, topic: str, callback: Callable[[Any], None],
+                     qos: Qos = QOS_DEFAULT) -> Handle:
+        """``callback`` for each message of ``type_name`` on ``topic``, called from :meth:`spin`/:meth:`spin_once`."""
+        raise NotImplementedError
+
+    def timer(self, period: float, callback: Callable[[], None]) -> Handle:
+        """``callback`` every ``period`` seconds of the node's clock (simulated time with ``use_sim_time``)."""
+        raise NotImplementedError
+
+    def now(self) -> float:
+        """ROS time (s): simulated time with ``use_sim_time``, else the wall clock."""
+        raise NotImplementedError
+
+    def make(self, type_name: str, **fields: Any) -> Any:
+        """A message of ``type_name`` of this backend with ``fields`` set (an unknown field is a ``TypeError``)."""
+        raise NotImplementedError
+
+    @staticmethod
+    def serialize(msg: Any) -> bytes:
+        """The message's CDR with its encapsulation header, as rosbag2 stores it."""
+        raise NotImplementedError
+
+    def spin_once(self, timeout: float) -> None:
+        """Run callbacks and timers for ``timeout`` seconds (returns early on :meth:`shutdown`)."""
+        raise NotImplementedError
+
+    def spin(self, until: Optional[Callable[[], bool]] = None) -> None:
+        """Run callbacks and timers until :meth:`shutdown` or ``until()`` is true."""
+        raise NotImplementedError
+
     # -- introspection ---------------------------------------------------------------
+    def node_names(self) -> list[tuple[str, str]]:
+        """(namespace, name) of the other nodes in the graph (``ros2 node list``)."""
+        raise NotImplementedError
+
+    def count_publishers(self, topic: str) -> int:
+        raise NotImplementedError
+
+    def count_subscribers(self, topic: str) -> int:
+        raise NotImplementedError
+
     def describe_discovery(self) -> str:
         """How far this node's DDS discovery reaches and how that is held (one line for the log)."""
         raise NotImplementedError
