@@ -280,19 +280,20 @@ def subscribes(node: str) -> list[Topic]:
     return [t for t in TOPICS.values() if node in t.subscribers]
 
 
+def qos_text(q: Qos) -> str:
+    """``reliable, transient local, keep last 1``: a QoS in words (the topic table, the nodes' docstrings)."""
+    parts = ["reliable" if q.reliable else "best effort"] + (["transient local"] if q.transient_local else [])
+    return ", ".join(parts + [f"keep last {q.depth}"])
+
+
 def topic_table() -> str:
     """The Markdown topic table of docs/graph.md, "Node graph"."""
-
-    def qos(q: Qos) -> str:
-        parts = ["reliable" if q.reliable else "best effort"] + (["transient local"] if q.transient_local else [])
-        return ", ".join(parts + [f"keep last {q.depth}"])
-
     rows = ["| topic | type | content | publishers → subscribers | rate | deadline | QoS (publishers; subscribers if "
             "other) |", "|---|---|---|---|---|---|---|"]
     for t in TOPICS.values():
         subscribers = ", ".join(t.subscribers) or "tools (monitor, recorder)"
-        reader = f"; {qos(t.reader_qos)}" if t.reader_qos else ""
+        reader = f"; {qos_text(t.reader_qos)}" if t.reader_qos else ""
         deadline = "—" if t.deadline is None else f"{t.deadline:g} s"
         rows.append(f"| `{t.name}` | {t.type} | {t.content} | {', '.join(t.publishers)} → {subscribers} | {t.rate} "
-                    f"| {deadline} | {qos(t.qos)}{reader} |")
+                    f"| {deadline} | {qos_text(t.qos)}{reader} |")
     return "\n".join(rows)
