@@ -118,3 +118,22 @@ def test_the_parallel_run_hands_out_groups_in_that_order() -> None:
     ran = [found.group(1) for found in re.finditer(r"\[gw0\] \[\s*\d+%\] PASSED (\S+?)::", out.stdout)]
     assert ran == ["tests/test_tire.py"] * 7 + ["tests/test_kinematics.py"] * 5, ran
 
+
+def test_a_graph_tests_processes_measure_the_packages_only_they_run() -> None:
+    """The configuration coverage.py gives child processes, as it serialises it, with only the graph's packages to
+    measure and every other setting kept; one it no longer recognises is an error."""
+    import base64
+    import json
+
+    from coverage.config import CoverageConfig
+
+    from conftest import GRAPH_COVERAGE_PACKAGES, children_measuring
+
+    config = CoverageConfig()
+    config.source_pkgs, config.parallel, config.sigterm = ["moose", "moose_ros"], True, True
+    narrowed = CoverageConfig.deserialize(children_measuring(GRAPH_COVERAGE_PACKAGES, config.serialize()))
+    assert narrowed.source_pkgs == GRAPH_COVERAGE_PACKAGES == ["moose_ros", "moose.canbus"]
+    assert (narrowed.parallel, narrowed.sigterm) == (True, True)
+    with pytest.raises(RuntimeError, match="holds no source_pkgs"):
+        children_measuring(GRAPH_COVERAGE_PACKAGES, base64.b64encode(json.dumps({"parallel": True}).encode()).decode())
+
