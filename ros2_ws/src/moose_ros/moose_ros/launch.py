@@ -20,6 +20,9 @@ The run ends when the simulator finishes (or, without a simulator, after ``durat
 gets SIGTERM (SIGKILL after a grace period), on which a node ends with status 0.  ``faults`` kill or stall
 nodes at given simulated times (:mod:`moose_ros.faults`).  With ``bag`` set, every topic of the graph is
 recorded into that bag directory.  A node that dies is reported, and the rest of the graph keeps running.
+
+:func:`launch` checks what it is given and hands the run to a :class:`Supervisor`, the one object that owns the
+node processes, the monitor (:mod:`moose_ros.monitor`), the fault injector, the recorder and the live view.
 """
 from __future__ import annotations
 
@@ -177,7 +180,7 @@ def launch(
     ``node_status``, ``incidents``, ``degraded``, ``deadline_misses``, ``stalls``, ``real_time_factor``,
     ``interrupted``, ``faults``, ``diagnostics``, ``odom_samples``, ``final_position_m``, ``final_speed_mps``,
     ``invalid_messages``, ``runtime`` (what each node and the monitor ran on) and ``exit_status``
-    (:func:`moose_ros.incidents.exit_status`).
+    (:func:`moose.verdict.exit_status`).
 
     ``runtime``: ``rclpy`` or ``dds`` for every node, or ``{node: runtime}`` (others: the default).
 
@@ -195,8 +198,8 @@ def launch(
         if fault.node not in overrides:
             raise ParamError(f"--fault {str(fault)!r} is invalid: {fault.node!r} is not a node of this run "
                              f"({', '.join(overrides)})")
-    run = Run(scenario, planner, seed, rate, lockstep, tuple(faults), params_file)
-    supervisor = Supervisor(run, overrides, params, runtime, out)
+    spec = RunSpec(scenario, planner, seed, rate, lockstep, tuple(faults), params_file)
+    supervisor = Supervisor(spec, overrides, params, runtime, out)
     supervisor.open(bag, foxglove)
     with supervisor.signals_stop_the_run():
         try:
@@ -207,7 +210,7 @@ def launch(
 
 
 @dataclasses.dataclass(frozen=True)
-class Run:
+class RunSpec:
     """What one launch runs: the scenario, the planner, the seed, the pace and the faults."""
 
     scenario: Scenario
@@ -228,9 +231,9 @@ class Supervisor:
     view), :meth:`run` (start the nodes, watch them until the run ends), :meth:`close` (stop everything, always),
     :meth:`summary`."""
 
-    def __init__(self, run: Run, overrides: dict[str, dict[str, Any]], params: Mapping[str, Any],
+    def __init__(self, spec: RunSpec, overrides: dict[str, dict[str, Any]], params: Mapping[str, Any],
                  runtime: Union[None, str, Mapping[str, str]], out: TextIO) -> None:
-        self.run_, self.overrides, self.out = run, overrides, out
+        self.spec, self.overrides, self.out = spec, overrides, out
         self.simulated = "vehicle_simulator" in overrides
         self.children = {name: process(runtime.get(name) if isinstance(runtime, Mapping) else runtime)
                          for name in overrides}
@@ -240,8 +243,8 @@ class Supervisor:
                                        else "dds")
         # what the nodes run with: the file, then the values given to every node (timing, friction belief, --set)
         shared = {key: value for key, value in params.items() if "." in key}
-        config = run.scenario.configure(with_overrides(load_config(run.params_file, reader=None), shared))
-        self.monitor = Monitor(run.scenario, config)
+        config = spec.scenario.configure(with_overrides(load_config(spec.params_file, reader=None), shared))
+        self.monitor = Monitor(spec.scenario, config)
         self.log = self.monitor.log
         self.procs: dict[str, subprocess.Popen[str]] = {}
         self.last_lines: dict[str, list[str]] = {}
@@ -257,7 +260,7 @@ class Supervisor:
         """Why the run ended before it was over (``""``: it was not cut short)."""
         self.lock = threading.Lock()
         self.stop = threading.Event()
-        self.injector = FaultInjector(run.faults, self.procs, run.rate, self.log, self.say, lockstep=run.lockstep)
+        self.injector = FaultInjector(spec.faults, self.procs, spec.rate, self.log, self.say, lockstep=spec.lockstep)
         self.recorder: Optional[Recorder] = None
         self.live: Optional[LiveView] = None
         self.node = create_node(MONITOR_NAME, overrides={"use_sim_time": False}, runtime=self.runtimes[MONITOR_NAME])
@@ -269,10 +272,10 @@ class Supervisor:
         try:
             check_domain(self.node)
             self.monitor.attach(self.node)
-            run = self.run_
+            spec = self.spec
             if bag is not None:  # an unusable path stops here; the run's parameters are kept (moose bag replan)
                 self.recorder = Recorder(self.node, bag, parameters=RunParameters(
-                    self.monitor.config, run.scenario, run.planner, run.seed))
+                    self.monitor.config, spec.scenario, spec.planner, spec.seed))
             if foxglove is not None:
                 self.live = LiveView(self.node, host=foxglove[0], port=foxglove[1])
                 self.out.write(f"[launch] Foxglove live view on {self.live.url}\n")
@@ -335,8 +338,8 @@ class Supervisor:
         for name, given in self.overrides.items():
             python, env = self.children[name]
             cmd = [python, "-m", "moose_ros.nodes", name]
-            if self.run_.params_file:
-                cmd += ["--params", self.run_.params_file]
+            if self.spec.params_file:
+                cmd += ["--params", self.spec.params_file]
             for key, value in given.items():
                 cmd += ["--param", f"{key}={json.dumps(value)}"]
             proc = spawn(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -356,10 +359,10 @@ class Supervisor:
         """Wall-clock seconds the run may take.  With the simulator: its run at ``rate`` plus its start-up (it waits
         up to a minute for the nodes); in lockstep, as fast as the graph goes down to :data:`LOCKSTEP_MIN_RATE` (a
         graph that stops going ends itself: lockstep_stuck); without a simulator (the car): the planned run."""
-        planned = self.run_.scenario.lead_time + self.run_.scenario.duration
-        if self.run_.lockstep:
+        planned = self.spec.scenario.lead_time + self.spec.scenario.duration
+        if self.spec.lockstep:
             return planned / LOCKSTEP_MIN_RATE + 60.0 + STUCK_TIMEOUT
-        return planned / self.run_.rate + 60.0 if self.simulated else planned
+        return planned / self.spec.rate + 60.0 if self.simulated else planned
 
     def reap(self, t_sim: Optional[float]) -> None:
         """Record each node that exited since the last look: how it ended, and an incident unless it finished."""
@@ -463,8 +466,8 @@ class Supervisor:
         """The run's summary (see :func:`launch`), after the incidents only the end tells are recorded: the run
         cut short, the deadline misses the nodes counted, a rate not held."""
         self.record_end_incidents()
-        run, monitor = self.run_, self.monitor
-        summary = summarize(monitor.result(run.planner, run.seed))
+        spec, monitor = self.spec, self.monitor
+        summary = summarize(monitor.result(spec.planner, spec.seed))
         if self.cut_short:
             if summary["outcome"] in ("clear", "stopped_short"):  # never a success from a run cut short
                 summary["outcome"], summary["complete"] = "incomplete", False
@@ -482,14 +485,14 @@ class Supervisor:
             degraded=self.log.degraded,
             deadline_misses={n: int(c.get("deadline_misses", 0)) for n, c in counters},
             stalls={n: int(c.get("stalls", 0)) for n, c in counters},
-            real_time_factor={"requested": None if run.lockstep else run.rate,
+            real_time_factor={"requested": None if spec.lockstep else spec.rate,
                               "achieved": monitor.real_time_factor()},
             interrupted=self.interrupted[0] if self.interrupted else None,
-            faults=[str(f) for f in run.faults],
+            faults=[str(f) for f in spec.faults],
             invalid_messages=monitor.invalid,
         )
         summary["exit_status"] = exit_status(summary["outcome"], summary["degraded"], summary["interrupted"])
-        summary["lockstep"] = run.lockstep
+        summary["lockstep"] = spec.lockstep
         summary["runtime"] = self.runtimes
         summary["bag_error"] = self.recorder.error if self.recorder is not None else None  # the recording, not the run
         return summary
@@ -505,8 +508,8 @@ class Supervisor:
                 self.log.add(None, name, "deadline_missed", f"{misses} deadline misses (longest executor gap "
                                                             f"{counters.get('longest_gap_ms', 0):.0f} ms)")
         achieved = self.monitor.real_time_factor()
-        rate = self.run_.rate
-        if not self.run_.lockstep and achieved is not None and achieved < RATE_TOLERANCE * rate:
+        rate = self.spec.rate
+        if not self.spec.lockstep and achieved is not None and achieved < RATE_TOLERANCE * rate:
             self.log.add(None, "vehicle_simulator", "rate_not_held",
                          f"--rate {rate:g} not held: achieved {achieved:.2f} (below {RATE_TOLERANCE:g} × requested)")
 
