@@ -60,6 +60,12 @@ def test_a_stale_block_is_rewritten_and_a_module_without_one_is_refused(tmp_path
         nodedocs.write(bare, ["obstacle_detector"])
 
 
+def test_the_command_in_the_markers_and_in_the_docs_is_this_generator() -> None:
+    command = "python -m moose_ros.nodedocs --write"
+    assert f"``{command}``" in nodedocs.BEGIN
+    assert f"`{command}`" in (Path(__file__).resolve().parents[1] / "docs" / "graph.md").read_text(encoding="utf-8")
+
+
 def test_the_command_prints_every_block() -> None:
     done = subprocess.run([sys.executable, "-m", "moose_ros.nodedocs"], capture_output=True, text=True, timeout=120,
                           check=True)
