@@ -2,6 +2,7 @@
 with which messages — without middleware."""
 from __future__ import annotations
 
+from moose_ros.faults import Fault
 from moose_ros.graph import GRAPHS
 from moose_ros.lockstep import ROOT, TickJoin, listeners, waits
 
@@ -62,19 +63,48 @@ def test_feedback_of_the_previous_tick_comes_first_and_a_faulted_node_is_not_wai
     j.marker("weight_fbl", 0, ("/planning/blend", "/control/reference"), None)
     assert j.take() == (1, [("/planning/blend", "blend0"), ("/perception/state", "state1"),
                             ("/perception/threat", "threat1")])
-    # from tick 2 on weight_fbl is out of the plan (a fault): its messages are taken as they come, no marker needed
+    # from tick 1 on weight_fbl is out of the plan (a fault): it ran no tick 1, so tick 2 needs no marker of it
     j.marker(ROOT, 2, (), tuple(n for n in everyone if n != "weight_fbl"))
     j.marker("observer", 2, (), None)
     j.marker("obstacle_detector", 2, (), None)
-    j.message("/planning/blend", "late blend")
-    assert j.take() == (2, [("/planning/blend", "late blend")])
+    assert j.take() == (2, [])
 
 
-def test_a_node_left_out_runs_on_whatever_arrived() -> None:
-    j = join("obstacle_detector")
-    j.marker(ROOT, 0, (), tuple(n for n in FULL if n != "obstacle_detector"))
-    j.message("/perception/state", "state0")
-    assert j.take() == (0, [("/perception/state", "state0")])
+def stalled_planner(ticks: int) -> TickJoin:
+    """The MPC planner's join, left out of ticks 1 … ``ticks`` (a stall), with one estimate and one threat announced
+    and sent per tick 0 … ``ticks`` + 1 and the blend of tick 0."""
+    j = join("mpc_planner")
+    for k in range(ticks + 2):
+        j.marker(ROOT, k, (), FULL if k == 0 or k > ticks else tuple(n for n in FULL if n != "mpc_planner"))
+        for node, topic in (("observer", "/perception/state"), ("obstacle_detector", "/perception/threat")):
+            j.marker(node, k, (topic,), None)
+            j.message(topic, f"{topic.rsplit('/', 1)[1]}{k}")
+        j.marker("weight_fbl", k, ("/planning/blend",) if k == 0 else (), None)
+    j.message("/planning/blend", "blend0")
+    return j
+
+
+def test_a_stalled_node_runs_no_tick_and_then_gets_what_its_queues_kept() -> None:
+    """A node the root leaves out of a tick (a stall) does not run it; at the tick the graph expects it again it gets
+    the backlog first, the newest of each topic up to its subscription's depth on the car (10 for the estimate and the
+    threat), then the tick's own messages — what the process would find in its reader queues after SIGCONT."""
+    j = stalled_planner(15)
+    assert j.take() == (0, [("/perception/state", "state0"), ("/perception/threat", "threat0")])
+    k, items = j.take()  # ticks 1 … 15 passed by, stopped
+    assert k == 16
+    assert items == ([("/planning/blend", "blend0")] + [("/perception/state", f"state{i}") for i in range(6, 16)]
+                     + [("/perception/threat", f"threat{i}") for i in range(6, 16)]
+                     + [("/perception/state", "state16"), ("/perception/threat", "threat16")])
+    assert j.take() is None and j.next == 17 and not j.backlog
+
+
+def test_a_stalled_node_waits_for_its_whole_backlog_before_it_runs_again() -> None:
+    j = stalled_planner(3)
+    j.queues["/perception/threat"].pop()  # tick 4's threat still on its way
+    assert j.take() is not None and j.take() is None and j.next == 4  # ticks 1 … 3 passed by; 4 waits
+    j.message("/perception/threat", "threat4")
+    k, items = j.take()
+    assert k == 4 and items[-1] == ("/perception/threat", "threat4") and len(items) == 1 + 2 * 3 + 2
 
 
 def test_the_bus_counts_frames_between_the_ecus_and_the_bridge() -> None:
@@ -96,3 +126,74 @@ def test_the_bus_counts_frames_between_the_ecus_and_the_bridge() -> None:
     bridge.message(BUS, "EPS_STATUS")
     assert bridge.take() == (0, [(BUS, "IMU"), (BUS, "WHEEL_SPEEDS"), (BUS, "EPS_STATUS"),
                                  ("/control/actuator_command", "u0")])
+
+
+def test_a_stall_longer_than_the_queues_keep_is_refused_in_lockstep() -> None:
+    """While a stalled node is stopped, what the graph sends it waits in keep-last histories of DEPTH ticks: a longer
+    stall would lose what it must be handed, so the launcher refuses it before anything starts."""
+    import pytest
+
+    from moose.params import ParamError
+    from moose_ros.faults import Fault
+    from moose_ros.launch import node_overrides
+    from moose_ros.lockstep import STALL_TICKS_MAX
+
+    def launch(fault: str, lockstep: bool = True) -> None:
+        node_overrides("full", "combined", {"scenario": "paper_v6_w2.0"}, lockstep=lockstep,
+                       faults=[Fault.parse(fault)])
+
+    longest = STALL_TICKS_MAX * 0.01
+    launch(f"observer:stall@2.5:{longest:g}")
+    with pytest.raises(ParamError, match=rf"observer:stall@2.5:{longest + 0.01:g}' is invalid in lockstep: a stall "
+                                         rf"lasts at most {longest:g} s"):
+        launch(f"observer:stall@2.5:{longest + 0.01:g}")
+    launch("observer:stall@2.5:5", lockstep=False)  # at real time the queues drop what they must
+    launch("vehicle_simulator:stall@2.5:5")  # simulated time stands still with it: no backlog
+
+
+def test_in_lockstep_the_fault_signals_wait_until_the_graph_has_taken_what_the_node_sent() -> None:
+    """The faulted node runs no tick from its fault's on, whenever the signal lands; the signal waits one tick, until
+    every reader has taken what the node sent before (a killed writer cannot resend a message lost on the way, and its
+    reader would wait for it for good).  A stall ends at its simulated end, where the graph waits for the node, not D
+    after the signal; a killed simulator steps no further than its fault's tick, so it is killed at that tick.  Real
+    processes (``sleep``), their state read from /proc."""
+    import subprocess
+    import time
+    from pathlib import Path
+
+    from moose_ros.faults import FaultInjector
+    from moose_ros.incidents import IncidentLog
+
+    def now(proc: subprocess.Popen) -> str:
+        if proc.poll() is not None:
+            return f"exit {proc.returncode}"
+        stat = Path(f"/proc/{proc.pid}/stat").read_text(encoding="ascii")
+        return "stopped" if stat[stat.rindex(")") + 2] in "Tt" else "running"
+
+    def state(proc: subprocess.Popen, settle: float = 0.2) -> str:
+        """Its state once a signal sent to it has taken effect (/proc shows it within milliseconds)."""
+        time.sleep(settle)
+        return now(proc)
+
+    names = ("observer", "mpc_planner", "vehicle_simulator")
+    procs = {name: subprocess.Popen(["sleep", "60"]) for name in names}
+    try:
+        plan = ("observer:kill@2.5", "mpc_planner:stall@2.5:0.6", "vehicle_simulator:kill@3.2")
+        faults = [Fault.parse(f) for f in plan]
+        injector = FaultInjector(faults, procs, 1.0, IncidentLog(), lambda _text: None, tick=0.01)
+        injector.poll(2.5)
+        assert [state(procs[n]) for n in names] == ["running"] * 3  # the graph may still read what they sent
+        injector.poll(2.51)
+        assert [state(procs[n]) for n in names] == ["exit -9", "stopped", "running"]
+        injector.poll(3.09)
+        assert state(procs["mpc_planner"]) == "stopped"  # 0.6 s after the signal, but not yet the stall's end
+        injector.poll(3.1)
+        assert state(procs["mpc_planner"]) == "running"  # continued: the graph waits for it at 3.1
+        injector.poll(3.19)
+        assert state(procs["vehicle_simulator"]) == "running"
+        injector.poll(3.2)
+        assert state(procs["vehicle_simulator"]) == "exit -9"
+    finally:
+        for proc in procs.values():
+            proc.kill()
+            proc.wait()

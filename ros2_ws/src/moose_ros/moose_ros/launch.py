@@ -53,7 +53,7 @@ from .faults import Fault, FaultInjector
 from .graph import DIAGNOSTICS, GRAPHS, NODES
 from .incidents import RATE_TOLERANCE
 from .live import LiveView
-from .lockstep import STUCK_TIMEOUT, sensor_transit
+from .lockstep import STUCK_TIMEOUT, check_stalls, sensor_transit
 from .monitor import Monitor
 from .parameters import check_parameter_file, node_parameters, parameter_names
 from .process import spawn
@@ -137,6 +137,7 @@ def node_overrides(graph: str, planner: str, params: Optional[dict[str, Any]] = 
         config, own = node_parameters(name, merged)  # refuses what the node would refuse
         if name == "vehicle_simulator" and lockstep:
             sensor_transit(config, own.vehicle_bus, True)  # the CAN graph's hop is a tick: no shorter sensor delay
+            check_stalls(faults, config.motion_period)  # a stalled node's backlog fits the lockstep queues
         out[name] = overrides
     return out
 
@@ -260,7 +261,8 @@ class Supervisor:
         """Why the run ended before it was over (``""``: it was not cut short)."""
         self.lock = threading.Lock()
         self.stop = threading.Event()
-        self.injector = FaultInjector(spec.faults, self.procs, spec.rate, self.log, self.say, lockstep=spec.lockstep)
+        self.injector = FaultInjector(spec.faults, self.procs, spec.rate, self.log, self.say,
+                                      tick=self.monitor.config.motion_period if spec.lockstep else None)
         self.recorder: Optional[Recorder] = None
         self.live: Optional[LiveView] = None
         self.node = create_node(MONITOR_NAME, overrides={"use_sim_time": False}, runtime=self.runtimes[MONITOR_NAME])
@@ -399,8 +401,8 @@ class Supervisor:
 
     def watch_heartbeats(self) -> None:
         """A running node silent on /diagnostics for longer than the topic's deadline (on its own clock: simulated
-        time for the nodes on ``use_sim_time``, the wall clock for the others) is a ``stalled`` incident, once per
-        silence."""
+        time for the nodes on ``use_sim_time`` or in lockstep, the wall clock for the others) is a ``stalled``
+        incident, once per silence."""
         deadline = DIAGNOSTICS.deadline
         assert deadline is not None
         now_wall, now_sim = time.monotonic(), self.monitor.sim_time
@@ -408,7 +410,7 @@ class Supervisor:
             if name in self.exits or name not in self.monitor.heard:
                 continue
             wall, sim = self.monitor.heard[name]
-            on_sim = bool(self.overrides[name].get("use_sim_time"))
+            on_sim = bool(self.overrides[name].get("use_sim_time") or self.overrides[name].get("lockstep_nodes"))
             if on_sim and (now_sim is None or sim is None):
                 continue
             quiet = (now_sim - sim) if on_sim else (now_wall - wall)

@@ -4,7 +4,8 @@ messages of that tick, so the graph computes what ``moose simulate`` computes, w
 **Protocol.**  A node in lockstep publishes, after its outputs of tick k, a marker ``moose_msgs/msg/Tick`` on
 ``/lockstep/<node>`` (:func:`marker_topic`): the tick's stamp and the topic of every message it published for
 that tick, in publication order.  The simulator's marker of tick k (the *root*) also names the nodes the graph
-waits for at tick k (its fault plan: a node killed or stalled at simulated t drops out from t on).
+waits for at tick k (its fault plan: a node killed at simulated t drops out from t on, one stalled for d from t to
+t + d).
 
 * The simulator publishes the sensor samples of tick k (those the sensor delay makes due at k), the obstacle
   when it appears, and its marker k; it steps the plant to k + 1 only when every expected node has reported
@@ -22,8 +23,10 @@ waits for at tick k (its fault plan: a node killed or stalled at simulated t dro
   the simulator (or the ECU emulator); no delay is left to the scheduler.
 
 Markers and the data a lockstep node reads are reliable with a keep-last depth of :data:`DEPTH`; the markers are
-transient local (a late joiner still sees them).  A node the root marker does not expect (faulted) runs
-unsynchronised: it handles whatever arrived, and who reads it takes its messages as they come.  A graph that
+transient local (a late joiner still sees them).  A node the root marker does not expect at a tick (a fault,
+:func:`left_out`: killed, or stalled) runs no tick then, and who reads it does not wait for it; what it would have
+read waits in its queues, and when the graph expects it again (a stall's end) it gets what its subscriptions' depths
+on the car keep (:meth:`TickJoin.take`).  A graph that
 stops reporting (a node that never publishes its marker) is not waited for forever: the simulator gives up after
 :data:`STUCK_TIMEOUT` seconds of wall-clock time with the ``lockstep_stuck`` error and ends the run.
 """
@@ -119,6 +122,15 @@ def tick_of(t: float, period: float) -> int:
     return int(round(t / period))
 
 
+def left_out(fault: Any, k: int, period: float) -> bool:
+    """Whether the graph does without ``fault``'s node (a :class:`moose_ros.faults.Fault`) at tick ``k``: a killed
+    node from the fault's tick on, a stalled one from it until the tick its stall ends (exclusive: it runs that tick
+    again, with its backlog); the root never (a stalled simulator stops simulated time itself)."""
+    if fault.node == ROOT or k < tick_of(fault.at, period):
+        return False
+    return fault.action == "kill" or k < tick_of(fault.at + fault.duration, period)
+
+
 class TickJoin:
     """Which tick a lockstep node may handle next, and the messages it hands over for it (see the module
     docstring).  Pure bookkeeping, no middleware: the node feeds it every input message (:meth:`message`) and
@@ -138,6 +150,9 @@ class TickJoin:
         """Tick → the nodes the graph waits for (the root's markers; the simulator's own plan)."""
         self.next = 0
         """The tick to handle next."""
+        self.backlog: dict[str, int] = {}
+        """Topic → the messages announced for the ticks this node was left out of (stalled): they wait in its
+        queues until it runs again, and only the newest :meth:`depth` of each are handed over then."""
 
     @property
     def topics(self) -> frozenset[str]:
@@ -168,46 +183,73 @@ class TickJoin:
         if node in self.markers and tick >= self.next - 1:
             self.markers[node][tick] = topics
 
-    def synchronised(self, tick: int) -> bool:
-        """Whether this node is waited for at ``tick`` (``True`` until the root says otherwise)."""
-        expected = self.expected.get(tick)
-        return expected is None or self.node in expected
+    def depth(self, topic: str) -> Optional[int]:
+        """How many messages of ``topic`` this node's subscription keeps while the node does not run (its keep-last
+        depth on the car, :attr:`moose_ros.graph.Topic.subscription_qos`); ``None`` for the bus, whose frames wait in
+        the socket's receive buffer."""
+        from .graph import TOPICS
+
+        return TOPICS[topic].subscription_qos.depth if topic in TOPICS else None
 
     def take(self) -> Optional[tuple[int, list[tuple[str, Any]]]]:
-        """The next tick and its messages in hand-over order, or ``None`` while something is missing."""
-        k = self.next
-        expected = self.expected.get(k)
-        if expected is None:
-            return None
-        order: list[tuple[str, int]] = []  # (topic, count) in hand-over order
-        flush: list[str] = []
+        """The next tick this node runs and its messages in hand-over order, or ``None`` while something is missing.
+
+        A tick whose root marker leaves this node out (a fault: killed, or stalled until the graph expects it
+        again) is not run: a stopped process does nothing.  What was announced for it stays queued, and at the
+        tick the node runs again it gets that backlog first, cut to the newest :meth:`depth` messages of each
+        topic (older ones are lost, as from a full reader queue), then the tick's own messages."""
+        while True:
+            k = self.next
+            expected = self.expected.get(k)
+            if expected is None:
+                return None
+            order = self._announced(k, expected)
+            if order is None:
+                return None
+            if self.node != ROOT and self.node not in expected:  # stopped at k: its inputs pile up
+                for topic in order:
+                    self.backlog[topic] = self.backlog.get(topic, 0) + 1
+                self._done(k)
+                continue
+            need = dict(self.backlog)
+            for topic in order:
+                need[topic] = need.get(topic, 0) + 1
+            if any(len(self.queues[topic]) < n for topic, n in need.items()):
+                return None
+            items: list[tuple[str, Any]] = []
+            for topic, n in self.backlog.items():
+                depth = self.depth(topic)
+                kept = n if depth is None else min(n, depth)
+                for i in range(n):
+                    item = self.queues[topic].popleft()
+                    if i >= n - kept:
+                        items.append((topic, item))
+            self.backlog = {}
+            items.extend((topic, self.queues[topic].popleft()) for topic in order)
+            self._done(k)
+            return k, items
+
+    def _announced(self, k: int, expected: frozenset[str]) -> Optional[list[str]]:
+        """The topics this node reads among what its upstream nodes announced for tick ``k`` (each of them at its
+        lag), one entry per message in hand-over order; ``None`` while a marker is missing.  A node the graph did not
+        expect at the marker's tick ran no tick (faulted) and is not waited for."""
+        order: list[str] = []
         for node, lag in self.waits.items():
             tick = k - lag
-            if tick < 0:
-                continue
-            if node != ROOT and (node not in self.expected.get(tick, expected) or self.node not in expected):
-                flush.extend(self.publishes.get(node, ()))  # unsynchronised: whatever came
+            if tick < 0 or (node != ROOT and node not in self.expected.get(tick, expected)):
                 continue
             topics = self.markers[node].get(tick)
             if topics is None:
                 return None
-            need: dict[str, int] = {}
-            for topic in topics:
-                if topic in self.queues:
-                    need[topic] = need.get(topic, 0) + 1
-                    order.append((topic, 1))
-            if any(len(self.queues[topic]) < n for topic, n in need.items()):
-                return None
-        items = [(topic, self.queues[topic].popleft()) for topic, _ in order]
-        for topic in flush:
-            queue = self.queues[topic]
-            while queue:
-                items.append((topic, queue.popleft()))
+            order.extend(topic for topic in topics if topic in self.queues)
+        return order
+
+    def _done(self, k: int) -> None:
+        """Tick ``k`` is handled (or passed by, stopped): forget its markers; the next is k + 1."""
         for node, lag in self.waits.items():
             self.markers[node].pop(k - lag, None)
         self.expected = {tick: nodes for tick, nodes in self.expected.items() if tick >= k - 1}
         self.next = k + 1
-        return k, items
 
 
 def marker_message(make: Callable[..., Any], node: str, t: float, topics: list[str],
@@ -223,6 +265,24 @@ def marker_message(make: Callable[..., Any], node: str, t: float, topics: list[s
 def marker_time(msg: Any) -> float:
     """The simulated time of a ``Tick`` message."""
     return float(msg.stamp.sec) + 1e-9 * float(msg.stamp.nanosec)
+
+
+STALL_TICKS_MAX = DEPTH - 10
+"""The longest stall of a node in lockstep, in ticks: while it is stopped, what the graph sends it waits in the
+publishers' keep-last histories of :data:`DEPTH` (one marker of each node, and up to one message of each topic, per
+tick), and what they dropped it could never be handed over.  Ten ticks of margin for what is in flight at SIGSTOP."""
+
+
+def check_stalls(faults: Collection[Any], period: float) -> None:
+    """A :class:`moose.params.ParamError` for a stall of a node other than the simulator longer than
+    :data:`STALL_TICKS_MAX` ticks of ``period`` (lockstep; :class:`moose_ros.faults.Fault`)."""
+    for fault in faults:
+        if fault.action == "stall" and fault.node != ROOT and tick_of(fault.duration, period) > STALL_TICKS_MAX:
+            from moose.params import ParamError
+
+            raise ParamError(f"--fault {str(fault)!r} is invalid in lockstep: a stall lasts at most "
+                             f"{STALL_TICKS_MAX * period:g} s ({STALL_TICKS_MAX} ticks: the graph's queues keep "
+                             f"{DEPTH}); run it at real time")
 
 
 def sensor_transit(config: Any, vehicle_bus: str, lockstep: bool) -> float:

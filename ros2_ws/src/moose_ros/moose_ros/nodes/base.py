@@ -20,10 +20,10 @@ starts) stands while such messages arrived within the last :data:`INVALID_HOLD`.
 its job) combined with its current *problems* (:meth:`GraphNode.problem`): the highest level wins, the
 messages are joined, and ``values`` carries ``problems`` (the problem keys, e.g. ``stale:/perception/state``,
 ``minimum_risk``), each problem's text under its key, ``deadline_misses``, ``stalls`` and ``longest_gap_ms``.  It is
-published once a second and at once whenever its level changes, so a node that reacts to another's health (the
-motion controller) hears of an error within one supervision cycle.  Levels: OK; WARN — degraded, the node still
-does its job (a planner fell back, a slow cycle); ERROR — the node cannot do its job, and who depends on it must
-not rely on its output.
+published once a second (:data:`HEARTBEAT`) and at once whenever its level or its set of problems changes, so a node
+that reacts to another's health (the motion controller) hears of an error within one supervision cycle.  Levels:
+OK; WARN — degraded, the node still does its job (a planner fell back, a slow cycle); ERROR — the node cannot do its
+job, and who depends on it must not rely on its output.
 """
 from __future__ import annotations
 
@@ -68,6 +68,9 @@ if TYPE_CHECKING:  # imported in GraphNode.table only: the nodes that build no t
 OK, WARN, ERROR = 0, 1, 2
 """diagnostic_msgs/DiagnosticStatus levels."""
 INVALID_HOLD = 1.0
+HEARTBEAT = 1.0
+"""Period (s) of the status on /diagnostics when nothing changes: on the wall clock, and in lockstep also on the
+ticks (each simulated second), so that the launcher judges a lockstep node's silence on simulated time."""
 """How long (s) the ``invalid:TOPIC`` problem stands after the last invalid message on TOPIC."""
 
 
@@ -142,6 +145,7 @@ class GraphNode:
         self._deferred = False
         self._published_level: Optional[int] = None
         self._published_stalls = 0
+        self._published_problems: frozenset[str] = frozenset()
         self.invalid: Counter[str] = Counter()
         """Invalid messages dropped, by topic."""
         self._invalid_last: dict[str, tuple[float, str]] = {}
@@ -166,7 +170,7 @@ class GraphNode:
             rt.timer(MATCH_RETRY, self._pump)
         else:
             rt.timer(SUPERVISION_PERIOD, self.supervise)
-        rt.timer(1.0, self.publish_diagnostics)
+        rt.timer(HEARTBEAT, self.publish_diagnostics)
 
     @property
     def lockstep(self) -> bool:
@@ -292,6 +296,8 @@ class GraphNode:
         """Lockstep: announce that this node has published everything for tick ``k``."""
         topics, self._published = self._published, []
         self._marker(marker_message(self.rt.make, self.name, round(k * self.tick_period, 9), topics, expected))
+        if k % round(HEARTBEAT / self.tick_period) == 0:
+            self.publish_diagnostics()
 
     def reject(self, topic: str, reason: str) -> None:
         """Count a dropped message on ``topic`` and say why: the ``invalid:TOPIC`` problem (logged when it starts)."""
@@ -370,8 +376,11 @@ class GraphNode:
         return level, message, values
 
     def _publish_on_change(self) -> None:
-        """Publish now when the level changed or the node noticed a stall of its own."""
-        if self.status()[0] != self._published_level or self.stalls != self._published_stalls:
+        """Publish now when the level or the set of problems changed, or the node noticed a stall of its own.  (On
+        the level alone, a WARN problem that came and went while another WARN stood was never published between
+        two heartbeats: weight_fbl's fallback during a 0.6 s stall of the MPC, in lockstep.)"""
+        if (self.status()[0] != self._published_level or self.stalls != self._published_stalls
+                or frozenset(self.problems) != self._published_problems):
             self.publish_diagnostics()
 
     # -- life cycle -------------------------------------------------------------------------
@@ -389,6 +398,7 @@ class GraphNode:
     def publish_diagnostics(self) -> None:
         level, message, values = self.status()
         self._published_level, self._published_stalls = level, self.stalls
+        self._published_problems = frozenset(self.problems)
         self._diag(cv.diagnostic_to_msg(self.rt, self.stamp_time(), self.name, level, message, values))
 
     def table(self) -> MaxSteeringTable:

@@ -81,7 +81,7 @@ from moose.vehicle import VehiclePlant, initial_state
 from .. import convert as cv
 from ..faults import Fault
 from ..graph import ACTUATOR_COMMAND, CLOCK, DIAGNOSTICS, OBSTACLES, ODOM, TF
-from ..lockstep import BUS, BUS_POLL, MATCH_RETRY, ROOT, sensor_transit, tick_of
+from ..lockstep import BUS, BUS_POLL, MATCH_RETRY, ROOT, left_out, sensor_transit, tick_of
 from ..runtime.base import NodeBase
 from .base import ERROR, WARN, GraphNode, sensor_publishers
 
@@ -261,9 +261,15 @@ class VehicleSimulator(GraphNode):
             self.waiting.discard(name)
 
     def expected(self, t: float) -> tuple[str, ...]:
-        """Lockstep: the nodes the graph waits for at ``t`` (the fault plan: a faulted node drops out at its fault's
-        time for the rest of the run)."""
-        return tuple(n for n in self.nodes if not any(f.node == n and t >= f.at - 1e-9 for f in self.faults))
+        """Lockstep: the nodes the graph waits for at ``t`` (the fault plan, :func:`moose_ros.lockstep.left_out`: a
+        killed node drops out at its fault's time for the rest of the run, a stalled one until its stall ends)."""
+        k = tick_of(t, self.dt)
+        return tuple(n for n in self.nodes if not any(left_out(f, k, self.dt) for f in self.faults if f.node == n))
+
+    def killed(self, k: int) -> bool:
+        """Lockstep: whether the fault plan kills the simulator at or before tick ``k`` (its last tick: a fault is exact
+        in simulated time, whenever the signal lands)."""
+        return any(f.node == ROOT and f.action == "kill" and tick_of(f.at, self.dt) <= k for f in self.faults)
 
     def started(self) -> bool:
         """Whether simulated time runs: every node named in ``wait_for`` has reported (or the start-up timeout
@@ -336,6 +342,8 @@ class VehicleSimulator(GraphNode):
                 return
             for _topic, deliver in step[1]:
                 deliver()
+            if self.killed(step[0]):  # the world ends at its tick: no step past it, the launcher's SIGKILL is due
+                return
             self.advance()
             if self.finished:
                 return
