@@ -5,11 +5,14 @@ node that must detect it (``moose_ros.fault_matrix.DETECTORS``: not the injected
 incident), and the run is reported as degraded with a non-zero exit status; a killed simulator (the world itself)
 is an incomplete run.
 
-The kills run in lockstep (faults at simulated time; what happens does not depend on the machine's load), the
-stalls at ``MOOSE_FAULT_RATE`` (default 1; see :data:`LOCKSTEP`).
+Every case runs in lockstep: a fault is exact in simulated time (``moose_ros.lockstep.left_out``: a killed node runs
+no tick from the fault's on, a stalled one none until its stall ends, and then gets what its queues kept), so what
+happens does not depend on the machine's load.  A stalled node reports its own stall when it runs again; a stalled
+simulator stops simulated time with it, so its run is the fault-free run, the loop's.
 docs/graph.md carries the matrix this code generates (``python -m moose_ros.fault_matrix --write docs/graph.md``)."""
 from __future__ import annotations
 
+import dataclasses
 import os
 import re
 from pathlib import Path
@@ -17,10 +20,14 @@ from pathlib import Path
 import pytest
 
 from isolation import claim_udp_port
+from lockstep_reference import assert_reproduces, reference
+from moose.scenario import load_scenario
 from moose_ros.fault_matrix import (
     MATRIX_BEGIN,
+    MATRIX_DURATION,
     MATRIX_END,
     MATRIX_GRAPHS,
+    MATRIX_SCENARIO,
     WEAKEST_BEGIN,
     WEAKEST_CASES,
     WEAKEST_DURATION,
@@ -34,17 +41,7 @@ from moose_ros.fault_matrix import (
 from moose_ros.faults import Fault
 
 ROOT = Path(__file__).resolve().parents[1]
-RATE = float(os.environ.get("MOOSE_FAULT_RATE", "1.0"))
 CASES = [(graph, fault) for graph in MATRIX_GRAPHS for fault in matrix_cases(graph)]
-LOCKSTEP = {"full", "can"}
-"""The graphs whose kills run in lockstep (what happens does not depend on the machine's load).  A stall is a
-wall-clock fault (SIGSTOP): in lockstep the graph stops waiting for the stalled node, which catches up on its own
-in less simulated time than the stall (a 0.6 s stall of the MPC was never noticed by weight_fbl), so stalls run at
-real time."""
-
-
-def in_lockstep(graph: str, fault: Fault) -> bool:
-    return graph in LOCKSTEP and fault.action == "kill"
 STOPS = {"observer", "obstacle_detector", "weight_fbl", "motion_controller"}
 """Killing one of these leaves nothing that can drive: the minimum-risk maneuver stops the car."""
 
@@ -58,17 +55,17 @@ def can_bus() -> dict[str, object]:
 
 @pytest.mark.graph
 @pytest.mark.slow
-@pytest.mark.parametrize("graph, fault", [
-    pytest.param(g, f, marks=() if in_lockstep(g, f) else (pytest.mark.realtime,)) for g, f in CASES],
-    ids=[f"{g}-{f.node}-{f.action}" for g, f in CASES])
+@pytest.mark.parametrize("graph, fault", CASES, ids=[f"{g}-{f.node}-{f.action}" for g, f in CASES])
 def test_fault(graph: str, fault: Fault, can_bus: dict[str, object]) -> None:
-    summary = run_case(graph, fault, rate=RATE, params=can_bus if graph == "can" else None,
-                       lockstep=in_lockstep(graph, fault))
+    summary = run_case(graph, fault, params=can_bus if graph == "can" else None, lockstep=True)
     log = summary["log"][-4000:]
     kinds = {i["kind"] for i in summary["incidents"]}
-    assert summary["faults"] == [str(fault)] and "fault_injected" in kinds
+    assert summary["faults"] == [str(fault)] and "fault_injected" in kinds, (summary["incidents"], log)
     assert summary["degraded"] and summary["exit_status"] != 0, log
     assert reported(fault, summary), (fault, summary["incidents"])  # by the node that must detect it
+    # no other node died during the run (how fast each one ends after SIGTERM is the machine's speed:
+    # tests/test_dds_linger.py)
+    assert not [n for n, s in summary["node_status"].items() if n != fault.node and s.startswith("died")], summary
     if fault.node == "vehicle_simulator" and fault.action == "kill":  # the world ended: nothing to judge after it
         assert summary["outcome"] == "incomplete" and summary["exit_status"] == 3
         assert {"died", "cut_short"} <= kinds
@@ -88,20 +85,25 @@ def test_fault(graph: str, fault: Fault, can_bus: dict[str, object]) -> None:
         assert "planner_fallback" in kinds and summary["outcome"] == "clear"  # the other planner completes it
     if fault.action == "stall":
         assert summary["node_exits"][fault.node] == 0  # it resumed and ended normally
+    if fault.action == "stall" and fault.node == "vehicle_simulator":  # simulated time stood still with it
+        scenario = dataclasses.replace(load_scenario(MATRIX_SCENARIO), duration=MATRIX_DURATION)
+        assert_reproduces(summary, reference(scenario))
+    elif fault.action == "stall":  # it noticed its own stall of the fault's length when it ran again
+        own = [i for i in summary["incidents"] if i["node"] == fault.node and i["kind"] == "stalled"]
+        assert own and summary["stalls"][fault.node] == 1, summary["incidents"]
+        assert own[0]["t"] == pytest.approx(fault.at + fault.duration), own
+        assert f"{1e3 * (fault.duration + 0.01):.0f} ms" in own[0]["message"], own  # the last tick before it, too
 
 
 @pytest.mark.graph
 @pytest.mark.slow
-@pytest.mark.parametrize("graph, fault", [
-    pytest.param(g, f, marks=() if in_lockstep(g, f) else (pytest.mark.realtime,)) for g, f in WEAKEST_CASES],
-    ids=[f"{g}-{f.node}-{f.action}" for g, f in WEAKEST_CASES])
+@pytest.mark.parametrize("graph, fault", WEAKEST_CASES, ids=[f"{g}-{f.node}-{f.action}" for g, f in WEAKEST_CASES])
 def test_the_weakest_accepted_maneuver_still_stops_the_car(graph: str, fault: Fault,
                                                           can_bus: dict[str, object]) -> None:
     """The probe's hostile file (``stop_speed`` and ``straight_tolerance`` of 1000) is refused now; the most
     permissive one accepted must still stop the car inside the field when the stack is killed."""
     params = {**(can_bus if graph == "can" else {}), **weakest_parameters()}
-    summary = run_case(graph, fault, rate=RATE, params=params, duration=WEAKEST_DURATION,
-                       lockstep=in_lockstep(graph, fault))
+    summary = run_case(graph, fault, params=params, duration=WEAKEST_DURATION, lockstep=True)
     log = summary["log"][-4000:]
     assert summary["outcome"] in ("clear", "stopped_short"), f"{summary['outcome']}: {summary['reason']}\n{log}"
     assert not summary["left_field"] and not summary["collided"] and not summary["lost_control"]
@@ -142,10 +144,8 @@ def test_the_generator_finds_its_markers_on_its_page_and_writes_it_back(tmp_path
     page = ROOT / match.group(1)
     text = page.read_text(encoding="utf-8")
     body = text.split(begin, 1)[1].split(end, 1)[0]
-    rate = re.search(r"--rate ([\d.]+)", body)
-    assert rate
+    assert "in lockstep" in body  # as the tests run the cases
     copy = tmp_path / page.name
     copy.write_text(text, encoding="utf-8")
-    write_matrix(str(copy), "\n".join(line for line in body.splitlines() if line.startswith("|")), float(rate.group(1)),
-                 weakest)
+    write_matrix(str(copy), "\n".join(line for line in body.splitlines() if line.startswith("|")), weakest)
     assert copy.read_text(encoding="utf-8") == text
