@@ -45,14 +45,16 @@ DDS_VARIABLES = ("ROS_DOMAIN_ID", "CYCLONEDDS_URI", "ROS_AUTOMATIC_DISCOVERY_RAN
 ATTACK_S = 4.0
 """How long a publisher that must not be matched sends (s): Cyclone DDS discovery on a quiet link takes well
 under a second."""
-AFTER_MATCH_S = 1.5
-"""How long a publisher that must be matched goes on sending once it is (s): 150 commands, which the bridge puts
-on the bus at its 100 Hz frame rate."""
+REACH_S = 60.0
+"""How long a publisher that must reach the bus may take to (s): it sends until the bus shows its command."""
 START_TIMEOUT = 60.0
 
 PUBLISHER = textwrap.dedent("""
     import json, sys, time
-    mode, config, duration, after_match = sys.argv[1], sys.argv[2], float(sys.argv[3]), float(sys.argv[4])
+    import threading
+    mode, config, duration = sys.argv[1], sys.argv[2], float(sys.argv[3])
+    done = threading.Event()  # the test closes our stdin when the bus has shown our command
+    threading.Thread(target=lambda: (sys.stdin.read(), done.set()), daemon=True).start()
     steer, torque = 0.3, 200.0
     if mode == "rclpy":  # a plain rclpy node (Fast DDS), not our runtime: ROS 2's own settings
         import rclpy
@@ -84,7 +86,7 @@ PUBLISHER = textwrap.dedent("""
         make = lambda: cls(steering_angle=steer, torque_rl=torque, torque_rr=torque)
         write, matched = writer.write, lambda: len(writer.get_matched_subscriptions())
     start, best, first = time.monotonic(), 0, None
-    while time.monotonic() - start < duration and (first is None or time.monotonic() - start - first < after_match):
+    while time.monotonic() - start < duration and not done.is_set():
         msg = make()
         now = time.time()
         msg.header.stamp.sec, msg.header.stamp.nanosec = int(now), int((now % 1) * 1e9)
@@ -106,7 +108,7 @@ LISTENER = textwrap.dedent("""
     threading.Thread(target=lambda: (sys.stdin.read(), done.set()), daemon=True).start()
     bus = open_bus("udp_multicast", DEFAULT_GROUP, DEFAULT_PORT)
     print("ready", flush=True)
-    frames, steer, torque, start = 0, 0.0, 0.0, time.monotonic()
+    frames, steer, torque, start, commanded = 0, 0.0, 0.0, time.monotonic(), False
     while time.monotonic() - start < duration and not done.is_set():
         frame = bus.recv(timeout=0.05)
         if frame is None or frame.arbitration_id not in (0x100, 0x101):
@@ -115,6 +117,9 @@ LISTENER = textwrap.dedent("""
         values = db.decode_message(frame.arbitration_id, bytes(frame.data))
         steer = max(steer, abs(values.get("SteerAngleCmd", 0.0)))
         torque = max(torque, abs(values.get("TorqueRL", 0.0)), abs(values.get("TorqueRR", 0.0)))
+        if steer > 0.29 and torque > 100.0 and not commanded:  # the steering and torque commanded from outside
+            commanded = True
+            print("commanded", flush=True)
     bus.shutdown()
     print(json.dumps({"command_frames": frames, "max_steer": steer, "max_torque": torque}), flush=True)
 """)
@@ -211,7 +216,8 @@ class Lines:
             self.queue.put(line)
         self.queue.put(None)
 
-    def wait_for(self, text: str, timeout: float) -> None:
+    def saw(self, text: str, timeout: float) -> bool:
+        """Whether the process prints a line holding ``text`` within ``timeout`` s."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             try:
@@ -221,13 +227,20 @@ class Lines:
             if line is None:
                 break
             if text in line:
-                return
-        raise AssertionError(f"no {text!r} within {timeout} s; output:\n{''.join(self.lines)}")
+                return True
+        return False
 
-    def result(self, timeout: float) -> dict:
-        """The JSON line the process printed last, once it has ended (closing its stdin asks a listener to end)."""
+    def wait_for(self, text: str, timeout: float) -> None:
+        if not self.saw(text, timeout):
+            raise AssertionError(f"no {text!r} within {timeout} s; output:\n{''.join(self.lines)}")
+
+    def end(self) -> None:
+        """Close the process's stdin: a listener, or a publisher that reaches the bus, ends then."""
         if self.proc.stdin is not None and not self.proc.stdin.closed:
             self.proc.stdin.close()
+
+    def result(self, timeout: float) -> dict:
+        """The JSON line the process printed last, once it has ended."""
         try:
             self.proc.wait(timeout=timeout)
         except subprocess.TimeoutExpired:
@@ -258,18 +271,29 @@ def start_bridge(hosts: Hosts, runtime: tuple[str, str, dict[str, str]],
 
 
 def attack(hosts: Hosts, ns: str, mode: str, config: str = "", env: Optional[dict[str, str]] = None,
-           runtime: Optional[tuple[str, str, dict[str, str]]] = None, reaches: bool = False) -> Lines:
-    """A publisher of 0.3 rad and 200 N·m in namespace ``ns``: for ATTACK_S, or, when it ``reaches`` the bridge
-    (the check that the test can fail), until AFTER_MATCH_S after its first match."""
+           runtime: Optional[tuple[str, str, dict[str, str]]] = None) -> Lines:
+    """A publisher of 0.3 rad and 200 N·m in namespace ``ns``, for ATTACK_S."""
     python, base = (sys.executable, None) if runtime is None else runtime[1:]
-    after = AFTER_MATCH_S if reaches else ATTACK_S
-    return Lines(hosts.spawn(ns, [python, "-c", PUBLISHER, mode, config, str(ATTACK_S), str(after)], env, base))
+    return Lines(hosts.spawn(ns, [python, "-c", PUBLISHER, mode, config, str(ATTACK_S)], env, base))
+
+
+def reach(hosts: Hosts, bus: Lines, ns: str, mode: str, config: str = "", env: Optional[dict[str, str]] = None,
+          runtime: Optional[tuple[str, str, dict[str, str]]] = None) -> tuple[dict, dict]:
+    """A publisher that must reach the bus (the check that the test can fail): it sends until the bus listener has
+    decoded its command, or for REACH_S; then (publisher's result, listener's result)."""
+    python, base = (sys.executable, None) if runtime is None else runtime[1:]
+    publisher = Lines(hosts.spawn(ns, [python, "-c", PUBLISHER, mode, config, str(REACH_S)], env, base))
+    bus.saw("commanded", REACH_S + START_TIMEOUT)
+    publisher.end()
+    sent = publisher.result(30)
+    bus.end()
+    return sent, bus.result(30)
 
 
 def listen(hosts: Hosts) -> Lines:
     """A decoder of the bus's command frames in namespace a, until its result is asked for (Lines.result), once
     the publishers have ended."""
-    listener = Lines(hosts.spawn(hosts.a, [sys.executable, "-c", LISTENER, str(ATTACK_S + 60.0)]))
+    listener = Lines(hosts.spawn(hosts.a, [sys.executable, "-c", LISTENER, str(REACH_S + START_TIMEOUT)]))
     listener.wait_for("ready", START_TIMEOUT)
     return listener
 
@@ -315,13 +339,12 @@ def test_the_bridge_on_its_defaults_cannot_be_reached_from_another_host(
         if runtime[0] == "rclpy":  # the probe's attacker: ROS 2 on Fast DDS naming the car computer as its peer
             remote.append(attack(hosts, hosts.b, "rclpy", env={"ROS_STATIC_PEERS": hosts.addr_a}, runtime=runtime))
         results = [r.result(ATTACK_S + 30) for r in remote]
+        bus.end()
         frames = bus.result(ATTACK_S + 30)
         assert [r["matched"] for r in results] == [0] * len(remote), results  # no discovery from the other host
         assert frames["command_frames"] > 100 and frames["max_steer"] == 0.0 and frames["max_torque"] == 0.0, frames
         # the same commands from the bridge's own host, on the runtime's defaults, do reach the bus
-        bus = listen(hosts)
-        local = attack(hosts, hosts.a, "runtime", runtime=runtime, reaches=True).result(ATTACK_S + 30)
-        frames = bus.result(ATTACK_S + 30)
+        local, frames = reach(hosts, listen(hosts), hosts.a, "runtime", runtime=runtime)
         assert local["matched"] >= 1, local
         assert frames["max_steer"] == pytest.approx(0.3, abs=1e-3) and frames["max_torque"] > 100.0, frames
     finally:
@@ -342,9 +365,7 @@ def test_the_opt_in_reaches_the_bridge_from_another_host(hosts: Hosts, runtime: 
         env, config = {"ROS_STATIC_PEERS": hosts.addr_b}, unicast_peer(hosts.addr_a)
     bridge = start_bridge(hosts, runtime, env)
     try:
-        bus = listen(hosts)
-        remote = attack(hosts, hosts.b, "plain", config, reaches=True).result(ATTACK_S + 30)
-        frames = bus.result(ATTACK_S + 30)
+        remote, frames = reach(hosts, listen(hosts), hosts.b, "plain", config)
     finally:
         stop(bridge.proc)
     assert remote["matched"] >= 1, remote
