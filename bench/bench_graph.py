@@ -11,6 +11,14 @@ existed: it includes the 100 Hz controller's timer phase, up to 10 ms by design)
 messages that never arrived against the designed rates, and the one-way latency of one hop between
 two otherwise idle processes (no compute).  Both vendors discover on loopback only, in a DDS domain
 claimed with ``tests/isolation.py``.  Run: ``python bench/bench_graph.py``.
+
+``--lockstep``: the lockstep graph's throughput instead (``moose launch --lockstep``, :mod:`moose_ros.lockstep`):
+per runtime, simulated seconds per wall-clock second of the extreme case (:data:`LOCKSTEP_SCENARIO`) between the
+first and the last odometry sample, against a baseline measured in the same process just before and after: the
+closed loop (``moose simulate``) on the same case, whose result the lockstep graph reproduces (the better of three
+runs before and three after the graph's, each printed: on a shared machine they can differ several times over).  The
+ratio is what the graph's processes and their messages cost per simulated second against one process computing the
+same.
 """
 from __future__ import annotations
 
@@ -31,6 +39,8 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 SIM_SECONDS = 30.0
+LOCKSTEP_SCENARIO = "paper_v7_tau1.4"
+"""The extreme case (7 m/s, τ = 1.4 s): the lockstep graph's reference case."""
 PINGS = 1000
 CYCLONE_LOOPBACK = ('<CycloneDDS><Domain Id="any"><General><Interfaces><NetworkInterface name="lo"/>'
                     "</Interfaces><AllowMulticast>spdp</AllowMulticast></General></Domain></CycloneDDS>")
@@ -118,6 +128,41 @@ def measure() -> dict[str, Any]:
             "transport": transport(PINGS)}
 
 
+def measure_lockstep() -> dict[str, Any]:
+    """The lockstep graph's pace on this process's runtime and the closed loop's on the same case, in this process
+    (the loop's best of the runs before and after the graph's)."""
+    from moose.config import load_config
+    from moose.scenario import load_scenario
+    from moose.simulation import simulate
+    from moose_ros.launch import launch
+
+    scenario = load_scenario(LOCKSTEP_SCENARIO)
+    simulated = scenario.lead_time + scenario.duration
+
+    def loop() -> float:
+        start = time.perf_counter()
+        simulate(load_config(), scenario, "combined")
+        return simulated / (time.perf_counter() - start)
+
+    before = max(loop() for _ in range(3))
+    summary = launch(scenario, {"scenario": LOCKSTEP_SCENARIO}, lockstep=True, out=io.StringIO())
+    after = max(loop() for _ in range(3))
+    return {"runtime": summary.get("runtime"), "outcome": summary["outcome"],
+            "clearance": summary["min_clearance_m"], "graph": summary["real_time_factor"]["achieved"],
+            "loop": max(before, after), "loop_spread": [before, after], "simulated": simulated}
+
+
+def report_lockstep(name: str, figures: dict[str, Any]) -> float:
+    """Print one runtime's lockstep pace against the loop's; returns the ratio."""
+    ratio = figures["graph"] / figures["loop"]
+    print(f"\n{name}: lockstep graph of {LOCKSTEP_SCENARIO} ({figures['simulated']:g} simulated s): "
+          f"{figures['outcome']}, clearance {figures['clearance']:.4f} m")
+    print(f"  graph {figures['graph']:.3f} simulated s per wall s; closed loop in the same process "
+          f"{figures['loop']:.1f} (before {figures['loop_spread'][0]:.1f}, after {figures['loop_spread'][1]:.1f}); "
+          f"graph / loop = {ratio:.4f} (1 / {1 / ratio:.0f})")
+    return ratio
+
+
 def report(name: str, figures: dict[str, Any]) -> dict[str, float]:
     """Print one runtime's table; returns its p50/p99 (ms)."""
     expected = int(SIM_SECONDS * 100)
@@ -145,8 +190,11 @@ def report(name: str, figures: dict[str, Any]) -> dict[str, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--measure", action="store_true", help="(internal) measure on this process's runtime")
-    if parser.parse_args().measure:
-        print(json.dumps(measure()))
+    parser.add_argument("--lockstep", action="store_true",
+                        help="the lockstep graph's throughput against the closed loop's, per runtime")
+    args = parser.parse_args()
+    if args.measure:
+        print(json.dumps(measure_lockstep() if args.lockstep else measure()))
         return
     sys.path.insert(0, str(REPO / "tests"))
     from isolation import claim_domain
@@ -157,21 +205,28 @@ def main() -> None:
     config.write_text(CYCLONE_LOOPBACK)
     base = {**os.environ, "ROS_DOMAIN_ID": str(claim_domain()), "CYCLONEDDS_URI": config.as_uri(),
             "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}  # rmw_fastrtps on loopback; Cyclone by the file
-    print(f"bench_graph: DDS domain {base['ROS_DOMAIN_ID']}, loopback only; {os.cpu_count()} cores")
-    figures = {}
+    load = os.getloadavg()[0]
+    print(f"bench_graph: DDS domain {base['ROS_DOMAIN_ID']}, loopback only; {os.cpu_count()} cores, "
+          f"load average {load:.1f}")
+    figures: dict[str, Any] = {}
     for name in ("dds", "rclpy"):
         try:
             python, env = process(name, base)
         except ParamError as exc:
             print(f"\n{name}: not measured: {exc}")
             continue
-        result = subprocess.run([python, __file__, "--measure"], env=env, capture_output=True, text=True, timeout=600)
+        command = [python, __file__, "--measure"] + (["--lockstep"] if args.lockstep else [])
+        result = subprocess.run(command, env=env, capture_output=True, text=True, timeout=1800)
         if result.returncode != 0:
             print(f"\n{name}: failed (exit {result.returncode}): {result.stderr[-2000:]}")
             continue
-        figures[name] = report({"dds": "Cyclone DDS runtime", "rclpy": "rclpy on Fast DDS"}[name],
-                               json.loads(result.stdout.strip().splitlines()[-1]))
-    if len(figures) == 2:
+        title = {"dds": "Cyclone DDS runtime", "rclpy": "rclpy on Fast DDS"}[name]
+        measured = json.loads(result.stdout.strip().splitlines()[-1])
+        figures[name] = report_lockstep(title, measured) if args.lockstep else report(title, measured)
+    print(f"load average at the end {os.getloadavg()[0]:.1f}")
+    if args.lockstep and len(figures) == 2:
+        print(f"\nrclpy / Cyclone, lockstep pace against the loop, same run: {figures['rclpy'] / figures['dds']:.2f}x")
+    elif len(figures) == 2:
         print("\nrclpy / Cyclone, same run (p50, p99):")
         for hop in figures["dds"]:
             (a50, a99), (b50, b99) = figures["dds"][hop], figures["rclpy"][hop]
