@@ -14,7 +14,6 @@ import time
 
 import pytest
 
-from moose_ros.launch import STOP_GRACE
 from moose_ros.lockstep import QOS_DATA
 from moose_ros.process import spawn
 from moose_ros.runtime import create_node
@@ -23,6 +22,9 @@ pytestmark = [pytest.mark.graph, pytest.mark.realtime]
 
 WRITERS = 10
 """Reliable writers whose reader is killed: at Cyclone's default they linger 10 s at shutdown."""
+PROMPT = 5.0
+"""Seconds within which the node must end: the launcher's grace when the fault was found (it is more generous now,
+moose_ros.launch.STOP_GRACE, for starved machines; how promptly a node ends is this test's claim)."""
 TYPE = "moose_msgs/msg/Tick"
 READER = f"""
 from moose_ros.lockstep import QOS_DATA
@@ -36,7 +38,7 @@ while True:
 """
 
 
-def test_a_node_whose_reader_was_killed_ends_within_the_launchers_grace() -> None:
+def test_a_node_whose_reader_was_killed_ends_promptly() -> None:
     node = create_node("linger_writer")
     pubs = [node.publisher(TYPE, f"/linger/t{k}", QOS_DATA) for k in range(WRITERS)]
     reader = spawn([sys.executable, "-c", READER], stdout=subprocess.PIPE, text=True)
@@ -54,4 +56,4 @@ def test_a_node_whose_reader_was_killed_ends_within_the_launchers_grace() -> Non
     started = time.monotonic()
     node.shutdown()
     took = time.monotonic() - started
-    assert took < STOP_GRACE, f"shutdown took {took:.1f} s with {WRITERS} writers to a killed reader"
+    assert took < PROMPT, f"shutdown took {took:.1f} s with {WRITERS} writers to a killed reader"

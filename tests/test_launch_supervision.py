@@ -165,7 +165,8 @@ def test_a_signal_to_the_launcher_is_incomplete_and_every_node_ends_normally(lau
                                                                              sig: signal.Signals, status: int) -> None:
     """Review: SIGTERM to the launcher was reported as collision-free, exit status 0.  Now the run is incomplete:
     exit status 3, or 130 for Ctrl-C (SIGINT to the launcher alone, as a supervisor would send it).  Every node ends
-    on the launcher's SIGTERM within its 5 s grace: judged by the wall clock, so in the serial phase."""
+    on the launcher's SIGTERM within its grace (moose_ros.launch.STOP_GRACE): judged by the wall clock, so in the
+    serial phase."""
     summary_path = tmp_path / "summary.json"
     bag = tmp_path / "bag"
     # at real time: a lockstep graph keeps every node busy, and at load average 30 three of them needed more than the

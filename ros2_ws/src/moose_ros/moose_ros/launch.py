@@ -53,18 +53,29 @@ from .faults import Fault, FaultInjector
 from .graph import DIAGNOSTICS, GRAPHS, NODES
 from .incidents import RATE_TOLERANCE
 from .live import LiveView
-from .lockstep import STUCK_TIMEOUT, check_stalls, sensor_transit
+from .lockstep import (
+    MONITOR,
+    QOS_MARKER,
+    STUCK_TIMEOUT,
+    TICK_TYPE,
+    check_stalls,
+    marker_message,
+    marker_topic,
+    sensor_transit,
+)
 from .monitor import Monitor
 from .parameters import check_parameter_file, node_parameters, parameter_names
 from .process import spawn
 from .runtime import create_node, process, rclpy_missing
 from .runtime.base import NodeBase, set_dotted
 
-STOP_GRACE = 5.0
-"""Seconds a node has to end after SIGTERM before it gets SIGKILL."""
+STOP_GRACE = 20.0
+"""Seconds a node has to end after SIGTERM before it gets SIGKILL.  A node normally ends within a second; the
+grace only bounds a node that hangs, so it is generous: on a starved machine (a load average of 50 on 2 cores, a
+fresh-clone CI beside four other jobs) nodes of a lockstep run that ended normally needed more than 5 s, and a
+SIGKILL then made a correct run's node exits depend on the machine's speed."""
 DOMAIN_CHECK = 1.0
 """Seconds the launcher listens for other nodes in its DDS domain before it starts any (:func:`check_domain`)."""
-MONITOR_NAME = "moose_monitor"
 LOCKSTEP_MIN_RATE = 0.05
 """The slowest lockstep run the launcher waits for (simulated seconds per wall-clock second), beyond start-up."""
 
@@ -150,7 +161,7 @@ def check_domain(node: NodeBase, wait: float = DOMAIN_CHECK) -> None:
     found: list[tuple[str, str]] = []
     while time.monotonic() < deadline:
         node.spin_once(0.05)
-        found = [n for n in node.node_names() if n[1] in NODES or n[1] == MONITOR_NAME]
+        found = [n for n in node.node_names() if n[1] in NODES or n[1] == MONITOR]
         if found:
             break
     if found:
@@ -240,7 +251,7 @@ class Supervisor:
                          for name in overrides}
         self.runtimes = {name: env["MOOSE_RUNTIME"] for name, (_python, env) in self.children.items()}
         # the monitor: on the nodes' runtime when this interpreter can run it, else (and for a mixed graph) on Cyclone
-        self.runtimes[MONITOR_NAME] = ("rclpy" if set(self.runtimes.values()) == {"rclpy"} and not rclpy_missing()
+        self.runtimes[MONITOR] = ("rclpy" if set(self.runtimes.values()) == {"rclpy"} and not rclpy_missing()
                                        else "dds")
         # what the nodes run with: the file, then the values given to every node (timing, friction belief, --set)
         shared = {key: value for key, value in params.items() if "." in key}
@@ -265,7 +276,7 @@ class Supervisor:
                                       tick=self.monitor.config.motion_period if spec.lockstep else None)
         self.recorder: Optional[Recorder] = None
         self.live: Optional[LiveView] = None
-        self.node = create_node(MONITOR_NAME, overrides={"use_sim_time": False}, runtime=self.runtimes[MONITOR_NAME])
+        self.node = create_node(MONITOR, overrides={"use_sim_time": False}, runtime=self.runtimes[MONITOR])
         """The monitor's node (created last: nothing else here holds a resource that needs closing)."""
 
     def open(self, bag: Optional[Union[str, Path]], foxglove: Optional[tuple[str, int]]) -> None:
@@ -275,6 +286,9 @@ class Supervisor:
             check_domain(self.node)
             self.monitor.attach(self.node)
             spec = self.spec
+            if spec.lockstep:  # the simulator keeps at most MONITOR_LAG ticks ahead of what the monitor has read
+                marker = self.node.publisher(TICK_TYPE, marker_topic(MONITOR), QOS_MARKER)
+                self.monitor.acknowledge = lambda t: marker(marker_message(self.node.make, MONITOR, t, []))
             if bag is not None:  # an unusable path stops here; the run's parameters are kept (moose bag replan)
                 self.recorder = Recorder(self.node, bag, parameters=RunParameters(
                     self.monitor.config, spec.scenario, spec.planner, spec.seed))

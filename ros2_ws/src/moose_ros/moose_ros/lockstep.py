@@ -22,6 +22,11 @@ t + d).
   (:class:`moose.timing.DelayLine`), the planning delay in ``weight_fbl``'s planning step, the command delay in
   the simulator (or the ECU emulator); no delay is left to the scheduler.
 
+The launcher's monitor (:data:`MONITOR`, with the node parameter ``lockstep_monitor``) is not in the pipeline: it
+judges and records the run and computes nothing the graph reads.  It acknowledges the odometry it has read on its
+own marker, and the simulator keeps at most :data:`MONITOR_LAG` ticks ahead of it, so that a slow launcher slows
+the graph rather than losing what it must judge and record.
+
 Markers and the data a lockstep node reads are reliable with a keep-last depth of :data:`DEPTH`; the markers are
 transient local (a late joiner still sees them).  A node the root marker does not expect at a tick (a fault,
 :func:`left_out`: killed, or stalled) runs no tick then, and who reads it does not wait for it; what it would have
@@ -76,6 +81,16 @@ BUS_POLL = 0.001
 MONITORED: tuple[str, ...] = tuple(t.name for t in (ODOM, STEERING, PLAN_MPC, BLEND, THREAT, DIAGNOSTICS))
 """What the launcher's monitor reads (:meth:`moose_ros.monitor.Monitor.attach`): with ``lockstep_monitor`` a lockstep
 publisher of these waits for its reader as for the graph's, so the summary misses nothing of tick 0."""
+MONITOR = "moose_monitor"
+"""The launcher's monitor node (:mod:`moose_ros.monitor`), a reader of the graph outside its pipeline."""
+MONITOR_LAG = DEPTH // 2
+"""Ticks the launcher's monitor may fall behind the simulator (with ``lockstep_monitor``): the simulator steps past
+tick k only when the monitor has acknowledged tick k − MONITOR_LAG on its marker.  The monitor, and the recorder in
+its process, read with a keep-last depth of :data:`DEPTH`; a reader that falls further behind than that loses
+samples (a gap in the run's odometry: an incomplete verdict, a bag with holes), which a starved launcher did while
+the graph ran on.  Half the depth leaves room for the acknowledgements' granularity."""
+MONITOR_ACK_EVERY = 10
+"""The monitor acknowledges every this many ticks of odometry (its marker is the last tick it has read)."""
 STUCK_TIMEOUT = 90.0
 """Wall-clock seconds the simulator waits for one tick before it ends the run with ``lockstep_stuck``."""
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 import numpy as np
 
@@ -23,7 +23,7 @@ from moose.simulation import SimulationResult
 from . import convert as cv
 from .graph import BLEND, DIAGNOSTICS, ODOM, PLAN_MPC, STEERING, THREAT, TOPICS
 from .incidents import IncidentLog
-from .lockstep import MONITORED
+from .lockstep import MONITOR_ACK_EVERY, MONITORED, tick_of
 from .runtime.base import NodeBase
 
 
@@ -49,6 +49,10 @@ class Monitor:
     """(wall-clock monotonic s, simulated s) of the first and the last odometry sample."""
     invalid: int = 0
     """Invalid plans and threats dropped (moose_ros.convert validates them)."""
+    acknowledge: Optional[Callable[[float], None]] = None
+    """Lockstep: called with the simulated time of each :data:`~moose_ros.lockstep.MONITOR_ACK_EVERY`-th tick of
+    odometry read, and of the run's last (the monitor's marker: the simulator keeps at most
+    :data:`~moose_ros.lockstep.MONITOR_LAG` ticks ahead of it)."""
 
     def attach(self, node: NodeBase) -> None:  # a tool that must not miss a sample (graph.Topic.tool_qos)
         callbacks = {ODOM.name: self.on_odom, STEERING.name: lambda m: setattr(self, "delta", m.delta),
@@ -64,6 +68,10 @@ class Monitor:
         self.odom.append((t, p.x, p.y, yaw, v.x, v.y, self.delta))
         now = (time.monotonic(), t)
         self.pace = [self.pace[0] if self.pace else now, now]
+        if self.acknowledge is not None:
+            end = self.scenario.lead_time + self.scenario.duration
+            if tick_of(t, self.config.motion_period) % MONITOR_ACK_EVERY == 0 or t >= end - 1e-9:
+                self.acknowledge(t)
 
     @property
     def sim_time(self) -> Optional[float]:

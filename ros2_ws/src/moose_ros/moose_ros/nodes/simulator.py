@@ -81,7 +81,21 @@ from moose.vehicle import VehiclePlant, initial_state
 from .. import convert as cv
 from ..faults import Fault
 from ..graph import ACTUATOR_COMMAND, CLOCK, DIAGNOSTICS, OBSTACLES, ODOM, TF
-from ..lockstep import BUS, BUS_POLL, MATCH_RETRY, ROOT, left_out, sensor_transit, tick_of
+from ..lockstep import (
+    BUS,
+    BUS_POLL,
+    MATCH_RETRY,
+    MONITOR,
+    MONITOR_LAG,
+    QOS_MARKER,
+    ROOT,
+    TICK_TYPE,
+    left_out,
+    marker_time,
+    marker_topic,
+    sensor_transit,
+    tick_of,
+)
 from ..runtime.base import NodeBase
 from .base import ERROR, WARN, GraphNode, sensor_publishers
 
@@ -239,6 +253,14 @@ class VehicleSimulator(GraphNode):
         self.startup_deadline = self.params.startup_timeout
         self.wall_start: Optional[float] = None
         self.subscribe(DIAGNOSTICS, self.on_diagnostics)
+        self.monitor_tick: Optional[int] = None
+        """Lockstep with the launcher's monitor: the last tick it has acknowledged (``None``: the graph has no monitor
+        to wait for; -1: none yet)."""
+        self.closing: Optional[float] = None
+        """Lockstep: since when the run is over and the simulator waits for the monitor to read its last ticks."""
+        if self.lockstep and self.params.lockstep_monitor:
+            self.monitor_tick = -1
+            rt.subscription(TICK_TYPE, marker_topic(MONITOR), self.on_monitor, QOS_MARKER)
         if self.lockstep:  # the graph paces simulated time (moose_ros.lockstep)
             rt.timer(BUS_POLL if self.params.vehicle_bus == "can" else MATCH_RETRY, self.lockstep_timer)
         else:  # wall-clock pacing: one motion step every dt / rate seconds; simulated time is published on /clock
@@ -301,8 +323,32 @@ class VehicleSimulator(GraphNode):
             self.publish_tick()
             self.advance()
 
+    def on_monitor(self, msg: Any) -> None:
+        """Lockstep: the launcher's monitor has read the odometry up to its marker's tick."""
+        self.monitor_tick = max(self.monitor_tick or -1, tick_of(marker_time(msg), self.dt))
+        if self.closing is not None:
+            self.close_when_read()
+        else:
+            self._pump()
+
+    def monitor_behind(self, tick: int) -> bool:
+        """Lockstep: whether the monitor is too far behind for the plant to step past ``tick``
+        (:data:`moose_ros.lockstep.MONITOR_LAG`)."""
+        return self.monitor_tick is not None and self.monitor_tick < tick - MONITOR_LAG
+
+    def close_when_read(self) -> None:
+        """Lockstep, the run over: end once the monitor has read the last tick, or after ``lockstep_timeout``."""
+        assert self.closing is not None
+        last = tick_of(self.t, self.dt)
+        if (self.monitor_tick is not None and self.monitor_tick >= last) \
+                or time.monotonic() - self.closing > self.params.lockstep_timeout:
+            self.closing = None
+            self.rt.shutdown()
+
     def lockstep_timer(self) -> None:
         """Lockstep: start simulated time when the graph is up, and end a run whose graph stopped reporting."""
+        if self.closing is not None:
+            self.close_when_read()
         if self.finished:
             return
         now = time.monotonic()
@@ -322,7 +368,7 @@ class VehicleSimulator(GraphNode):
             assert self.join is not None
             k = self.join.next
             missing = [n for n, lag in self.join.waits.items() if n in self.expected(self.t)
-                       and k - lag not in self.join.markers[n]]
+                       and k - lag not in self.join.markers[n]] + ([MONITOR] if self.monitor_behind(k) else [])
             self.stuck(now - self.progress, f"no tick from {', '.join(missing) or 'the graph'}")
 
     def stuck(self, waited: float, why: str) -> None:
@@ -337,6 +383,8 @@ class VehicleSimulator(GraphNode):
         assert join is not None
         while not self.finished and self.progress is not None:
             self.io.poll()
+            if self.monitor_behind(join.next):  # on_monitor pumps again
+                return
             step = join.take()
             if step is None:
                 return
@@ -389,8 +437,15 @@ class VehicleSimulator(GraphNode):
         self.t = round(t + self.dt, 9)
 
     def finish(self, message: str) -> None:
+        """The run is over (``finished``) or cannot go on: say so, and end; a lockstep run that finished ends once
+        the launcher's monitor has read its last ticks (:meth:`close_when_read`: a writer that goes away takes the
+        samples its slow readers have not read with it)."""
         self.finished = True
         self.message = message
         self.publish_diagnostics()
         self.io.close()
-        self.rt.shutdown()
+        if message == "finished" and self.monitor_tick is not None:
+            self.closing = time.monotonic()
+            self.close_when_read()
+        else:
+            self.rt.shutdown()
