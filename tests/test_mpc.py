@@ -28,6 +28,7 @@ from moose.planner.mpc import (
 from moose.planner.mpc.projected_newton import CompilerMissing
 from moose.schema import PAPER_CAPS, MpcParams, PlanningGrid, SolverCaps
 from moose.signals import Obstacle, PlannerInput, StateEstimate, Threat
+from solve_time import INSTANT
 from test_mpc_solvers import reference_minimum
 
 GRID = PlanningGrid(N_p=10, t_s=0.2, a_x_max=6.0, a_y_max=6.0, mu=0.3)
@@ -53,7 +54,7 @@ def state(v: float = 7.0, x: float = 0.0, y: float = 0.0, vy: float = 0.0) -> St
 def receding_horizon(params: MpcParams, th: Threat | None, s0: list[float], v_des: float, steps: int,
                      clear_after: float = 2.0) -> tuple[np.ndarray, list]:
     """Closed loop on the kinematic model: the first input applied, the rest shifted as the next guess."""
-    planner = MpcPlanner(params, GRID)
+    planner = MpcPlanner(params, GRID, compute_time_s=INSTANT)
     s = np.array(s0, dtype=float)
     guess = None
     traj, results = [s.copy()], []
@@ -174,7 +175,7 @@ CLIPPED = MpcParams(barrier="clipped")
        st.floats(0.5, 9.0), st.floats(-1.0, 1.0), st.sampled_from([DEFAULT, CLIPPED]))
 def test_cost_is_eq_jcaldef_over_the_predicted_states(u: list[float], side: int, v: float, y: float,
                                                       params: MpcParams) -> None:
-    planner = MpcPlanner(params, GRID)
+    planner = MpcPlanner(params, GRID, compute_time_s=INSTANT)
     th = threat(w=2.2, x_min=12.0, side=side, y_path=0.3)
     uu = np.array(u).reshape(10, 2)
     s0 = np.array([1.0, y, v, 0.4])
@@ -193,7 +194,7 @@ def test_example_eta_steers_at_the_bound_without_braking(eta: tuple[float, float
     braking (x_obs − x − 4 v_X ≪ 0), no input reaches it, and both sets steer at the bound;
     braking cannot lower the barrier, so J_brake and J_stable keep the speed.
     """
-    planner = MpcPlanner(MpcParams(eta=eta), dataclasses.replace(GRID, N_p=2))
+    planner = MpcPlanner(MpcParams(eta=eta), dataclasses.replace(GRID, N_p=2), compute_time_s=INSTANT)
     inp = PlannerInput(0.0, state(5.0), threat(w=1.0, x_min=1.0), 5.0, None)
     grid = np.linspace(-1.0, 1.0, 81)
     costs = np.array([[planner.cost(inp, [[a, b], [a, b]]) for b in grid] for a in grid])
@@ -254,7 +255,7 @@ def test_extreme_case_evades_to_the_safe_side(params: MpcParams) -> None:
 def test_infeasible_start_has_a_finite_cost_and_steers_away() -> None:
     for side in (1, -1):
         th = threat(w=2.6, x_min=5.0, side=side)  # τ = 0.7 s: y_safe ≈ w over the whole horizon
-        planner = MpcPlanner(DEFAULT, GRID)
+        planner = MpcPlanner(DEFAULT, GRID, compute_time_s=INSTANT)
         inp = PlannerInput(0.0, state(7.0), th, 7.0, None)
         assert y_safe(0.0, 7.0, 5.0, 2.6, epsilon(GRID.mu)) > 2.5  # the log is undefined at the start
         result = planner.plan(inp)
@@ -275,26 +276,29 @@ def test_lane_keeping_without_a_threat() -> None:
 
 def test_statuses() -> None:
     inp = PlannerInput(0.0, state(y=4.0), threat(), 7.0, None)  # beside the zone's far edge: y_safe is below
-    capped = MpcPlanner(MpcParams(caps=SolverCaps(max_iter=1, max_fun_evals=10)), GRID).plan(inp)
+    capped = MpcPlanner(MpcParams(caps=SolverCaps(max_iter=1, max_fun_evals=10)), GRID,
+                        compute_time_s=INSTANT).plan(inp)
     assert capped.status == "capped" and capped.iterations == 1
     converged = MpcPlanner(MpcParams(caps=SolverCaps(max_iter=200, max_fun_evals=2000), max_iter_ls=8),
-                           GRID).plan(inp)
+                           GRID, compute_time_s=INSTANT).plan(inp)
     assert converged.status == "converged" and converged.iterations < 200
     late = MpcPlanner(MpcParams(time_budget_s=1e-9), GRID).plan(inp)
     assert late.status == "over_budget" and np.all(np.isfinite(late.accel))
     for bad in (dataclasses.replace(state(), x=float("nan")), dataclasses.replace(state(), y=float("inf"))):
-        failed = MpcPlanner(DEFAULT, GRID).plan(PlannerInput(0.0, bad, threat(), 7.0, np.full((10, 2), 9.0)))
+        failed = MpcPlanner(DEFAULT, GRID, compute_time_s=INSTANT).plan(
+            PlannerInput(0.0, bad, threat(), 7.0, np.full((10, 2), 9.0)))
         assert failed.status == "failed" and failed.cost == math.inf
         assert np.all(np.isfinite(failed.accel)) and np.all(np.isfinite(failed.predicted))
         assert np.all(np.abs(failed.accel) <= 6.0)  # the clipped initial guess
-    nan_guess = MpcPlanner(DEFAULT, GRID).plan(PlannerInput(0.0, state(), threat(), 7.0, np.full((10, 2), np.nan)))
+    nan_guess = MpcPlanner(DEFAULT, GRID, compute_time_s=INSTANT).plan(
+        PlannerInput(0.0, state(), threat(), 7.0, np.full((10, 2), np.nan)))
     assert nan_guess.status in SOLVED and math.isfinite(nan_guess.cost)
 
 
 def test_a_plan_through_the_barrier_is_reported_as_the_papers_failure() -> None:
     """Sec. IV: the MPC "fails to provide a solution" where its predicted path crosses y_safe (d < 0 at a step of
     the horizon before the zone's far edge): status ``barrier_violated``, whatever the solver's own word."""
-    planner = MpcPlanner(DEFAULT, GRID)
+    planner = MpcPlanner(DEFAULT, GRID, compute_time_s=INSTANT)
     th = threat()  # 7 m/s, 10 m ahead (τ = 1.4 s): y_safe ≈ w over the whole horizon
     on_path = planner.plan(PlannerInput(0.0, state(), th, 7.0, None))
     gap = planner.barrier_gap(PlannerInput(0.0, state(), th, 7.0, None), on_path.predicted)
@@ -333,11 +337,12 @@ def test_the_barrier_ends_at_the_far_edge() -> None:
 def test_result_shapes_bounds_and_prediction() -> None:
     for n_p in (2, 10, 20):
         params, grid = DEFAULT, dataclasses.replace(GRID, N_p=n_p)
-        result = MpcPlanner(params, grid).plan(PlannerInput(0.0, state(), threat(), 7.0, np.zeros((3, 2))))
+        result = MpcPlanner(params, grid, compute_time_s=INSTANT).plan(
+            PlannerInput(0.0, state(), threat(), 7.0, np.zeros((3, 2))))
         assert result.accel.shape == (n_p, 2) and result.predicted.shape == (n_p + 1, 4)
         assert np.all(np.abs(result.accel) <= 6.0 + 1e-12)
         np.testing.assert_allclose(result.predicted, kinematic_rollout(np.array([0, 0, 7.0, 0]), result.accel, 0.2))
-        assert result.cost == pytest.approx(MpcPlanner(params, grid).cost(
+        assert result.cost == pytest.approx(MpcPlanner(params, grid, compute_time_s=INSTANT).cost(
             PlannerInput(0.0, state(), threat(), 7.0, None), result.accel / 6.0))
 
 
@@ -346,7 +351,7 @@ def test_result_shapes_bounds_and_prediction() -> None:
 @settings(max_examples=25, deadline=None, derandomize=True, database=None)
 @given(st.floats(0.0, 3.0), st.floats(1.0, 8.0), st.floats(-1.0, 0.2), st.floats(-1.0, 1.0))
 def test_speed_never_negative_and_never_worse_than_the_start(v: float, x_obs: float, ux: float, uy: float) -> None:
-    planner = MpcPlanner(DEFAULT, GRID)
+    planner = MpcPlanner(DEFAULT, GRID, compute_time_s=INSTANT)
     guess = np.tile([ux * 6.0, uy * 6.0], (10, 1))  # braking guesses find reversing without the floor
     inp = PlannerInput(0.0, state(v), threat(w=2.0, x_min=x_obs), 0.0, guess)
     result = planner.plan(inp)
@@ -366,7 +371,7 @@ def test_projected_newton_does_not_stop_on_a_tiny_step_far_from_a_minimum() -> N
     to 5e-4.  The solver once stopped on that short step and reported it converged, at 34.79 with
     ‖u − P(u − ∇f)‖∞ = 1.5; scipy's L-BFGS-B goes on from that plan to 5.3.  (The plan's path crosses y_safe either
     way, so the weight function hands over to the MSF.)"""
-    planner = MpcPlanner(DEFAULT, GRID)
+    planner = MpcPlanner(DEFAULT, GRID, compute_time_s=INSTANT)
     inp = PlannerInput(0.0, state(1.0), threat(w=2.0, x_min=1.0), 0.0, np.tile([-3.0, 3.0], (10, 1)))
     result = planner.plan(inp)
     start = planner.cost(inp, planner.initial_guess(inp))
@@ -392,7 +397,7 @@ GRADIENT = _gradient()
 
 @functools.cache
 def solver_planner(name: str) -> MpcPlanner:
-    return MpcPlanner(MpcParams(solver=name), GRID)
+    return MpcPlanner(MpcParams(solver=name), GRID, compute_time_s=INSTANT)
 
 
 # derandomized as above
@@ -427,7 +432,7 @@ def test_converged_is_reported_only_at_a_stationary_point(name: str, v: float, x
 
 
 def test_mirrored_side_gives_the_mirrored_solution() -> None:
-    planner = MpcPlanner(DEFAULT, GRID)
+    planner = MpcPlanner(DEFAULT, GRID, compute_time_s=INSTANT)
     for x_min in (6.0, 12.0, 20.0):
         left = planner.plan(PlannerInput(0.0, state(6.0, y=1.0, vy=0.3), threat(w=2.4, x_min=x_min, y_path=1.2), 6.0,
                                          None))
@@ -439,7 +444,7 @@ def test_mirrored_side_gives_the_mirrored_solution() -> None:
 
 
 def test_warm_start_from_the_previous_solution_is_not_worse() -> None:
-    planner = MpcPlanner(DEFAULT, GRID)
+    planner = MpcPlanner(DEFAULT, GRID, compute_time_s=INSTANT)
     cold = planner.plan(PlannerInput(0.0, state(), threat(), 7.0, None))
     warm = planner.plan(PlannerInput(0.0, state(), threat(), 7.0, cold.accel))
     assert warm.cost <= cold.cost + 1e-12
@@ -450,15 +455,15 @@ def test_warm_start_from_the_previous_solution_is_not_worse() -> None:
                                     dict(solver="paper_sqp")])
 def test_solver_variants_solve_the_same_problem(change: dict) -> None:
     inp = PlannerInput(0.0, state(), threat(), 7.0, None)
-    base = MpcPlanner(DEFAULT, GRID)
-    other = MpcPlanner(MpcParams(**change), GRID).plan(inp)
+    base = MpcPlanner(DEFAULT, GRID, compute_time_s=INSTANT)
+    other = MpcPlanner(MpcParams(**change), GRID, compute_time_s=INSTANT).plan(inp)
     assert other.status in SOLVED
     assert other.accel[0, 1] == pytest.approx(6.0, abs=0.3)  # the same manoeuvre: full steering away
     assert base.cost(inp, other.accel / 6.0) < base.cost(inp, np.zeros((10, 2)))
 
 
 def test_problem_is_built_once() -> None:
-    a, b = MpcPlanner(DEFAULT, GRID), MpcPlanner(MpcParams(), GRID)
+    a, b = MpcPlanner(DEFAULT, GRID, compute_time_s=INSTANT), MpcPlanner(MpcParams(), GRID, compute_time_s=INSTANT)
     assert a.solver is b.solver  # same parameter set: one problem and solver, parametric in the planning inputs
     assert PAPER_CAPS == SolverCaps(10, 100, 1e-3, 1e-3, 1e-3)
 
@@ -467,9 +472,9 @@ def test_without_a_c_compiler_the_default_solver_names_the_way_out(tmp_path, mon
     monkeypatch.setenv("MOOSE_CACHE_DIR", str(tmp_path))  # nothing cached: the library must be built
     monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
     with pytest.raises(CompilerMissing, match="mpc.solver.*sqp_lbfgs"):
-        MpcPlanner(MpcParams(eta_return=0.125), GRID)  # a parameter set not built before
+        MpcPlanner(MpcParams(eta_return=0.125), GRID, compute_time_s=INSTANT)  # a parameter set not built before
     for solver in ("sqp_lbfgs", "paper_sqp"):  # these evaluate the cost in CasADi's virtual machine instead
-        assert MpcPlanner(MpcParams(eta_return=0.125, solver=solver), GRID).plan(
+        assert MpcPlanner(MpcParams(eta_return=0.125, solver=solver), GRID, compute_time_s=INSTANT).plan(
             PlannerInput(0.0, state(), threat(), 7.0, None)).status in SOLVED
 
 

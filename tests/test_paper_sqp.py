@@ -18,6 +18,7 @@ from moose.planner.mpc import MpcPlanner
 from moose.planner.mpc.paper_sqp import FD_STEP, SqpOptions, box_qp, fmincon_sqp, sqp_options
 from moose.schema import MpcParams, PlanningGrid, SolverCaps
 from moose.signals import Obstacle, PlannerInput, StateEstimate, Threat
+from solve_time import INSTANT
 
 PAPER = MpcParams(solver="paper_sqp")
 KINEMATIC = PlanningGrid(N_p=10, t_s=0.2, a_x_max=6.0, a_y_max=6.0, mu=0.3)
@@ -146,7 +147,7 @@ def test_a_non_finite_start_fails_and_non_finite_trials_are_rejected() -> None:
 def test_the_cap_leaves_about_four_iterations_at_n_p_10(grid: PlanningGrid, n_p: int) -> None:
     """The notes' problem (v = 7, obstacle 10 m ahead, w = 2.6 m) from a cold start: 21 evaluations
     per gradient at N_p = 10 leave four iterations, 41 at N_p = 20 two."""
-    planner = MpcPlanner(PAPER, dataclasses.replace(grid, N_p=n_p))
+    planner = MpcPlanner(PAPER, dataclasses.replace(grid, N_p=n_p), compute_time_s=INSTANT)
     f, guess = mpc_cost(planner, planner_input(7.0, 10.0, 2.6))
     result = fmincon_sqp(f, guess, -1.0, 1.0, sqp_options(PAPER))
     assert result.evaluations == f.calls <= 100
@@ -162,7 +163,7 @@ def test_the_cap_leaves_about_four_iterations_at_n_p_10(grid: PlanningGrid, n_p:
 def test_caps_bounds_and_descent_on_the_mpc_cost(grid: PlanningGrid, n_p: int, v: float, x_obs: float, w: float,
                                                  side: int, vy: float, held: tuple[float, float] | None) -> None:
     grid = dataclasses.replace(grid, N_p=n_p)
-    planner = MpcPlanner(PAPER, grid)
+    planner = MpcPlanner(PAPER, grid, compute_time_s=INSTANT)
     guess = None if held is None else np.tile(np.array(held) * [grid.a_x_max, grid.a_y_max], (n_p, 1))
     f, start = mpc_cost(planner, planner_input(v, x_obs, w, side, vy, guess))
     result = fmincon_sqp(f, start, -1.0, 1.0, sqp_options(PAPER))
@@ -178,24 +179,26 @@ def test_caps_bounds_and_descent_on_the_mpc_cost(grid: PlanningGrid, n_p: int, v
 
 def test_planner_statuses_with_the_paper_baseline() -> None:
     inp = planner_input(7.0, 10.0, 2.6)
-    late = MpcPlanner(PAPER, KINEMATIC).plan(inp)  # 1.4 s ahead: no plan keeps the path above y_safe
+    # 1.4 s ahead: no plan keeps the path above y_safe
+    late = MpcPlanner(PAPER, KINEMATIC, compute_time_s=INSTANT).plan(inp)
     assert late.status == "barrier_violated" and late.iterations == 4  # the hand-over trigger outranks "capped"
     assert late.accel[0, 1] == pytest.approx(6.0)  # full steering away, as the other solvers
     early = planner_input(7.0, 40.0, 2.6)  # 5.7 s ahead: the capped plan clears y_safe
-    capped = MpcPlanner(PAPER, KINEMATIC).plan(early)
+    capped = MpcPlanner(PAPER, KINEMATIC, compute_time_s=INSTANT).plan(early)
     assert capped.status == "capped" and capped.iterations == 4
-    two_step = MpcPlanner(PAPER, dataclasses.replace(KINEMATIC, N_p=2)).plan(early)
+    two_step = MpcPlanner(PAPER, dataclasses.replace(KINEMATIC, N_p=2), compute_time_s=INSTANT).plan(early)
     assert two_step.status == "converged"
-    loose = MpcPlanner(dataclasses.replace(PAPER, caps=SolverCaps(max_iter=2, max_fun_evals=1000)), KINEMATIC)
+    loose = MpcPlanner(dataclasses.replace(PAPER, caps=SolverCaps(max_iter=2, max_fun_evals=1000)), KINEMATIC,
+                       compute_time_s=INSTANT)
     assert loose.plan(early).status == "capped" and loose.plan(early).iterations == 2
     nan = dataclasses.replace(inp, estimate=dataclasses.replace(inp.estimate, vx=math.nan))
-    failed = MpcPlanner(PAPER, KINEMATIC).plan(nan)
+    failed = MpcPlanner(PAPER, KINEMATIC, compute_time_s=INSTANT).plan(nan)
     assert failed.status == "failed" and failed.cost == math.inf and np.all(np.isfinite(failed.accel))
 
 
 def test_the_planner_evaluates_the_cost_only_through_the_counted_callable(monkeypatch) -> None:
     """The planner's solver evaluates 𝒥 through ``evaluate`` only: counted there, never above the cap."""
-    planner = MpcPlanner(PAPER, realistic(PAPER_FRICTION))
+    planner = MpcPlanner(PAPER, realistic(PAPER_FRICTION), compute_time_s=INSTANT)
     solver = planner.solver
     inp = planner_input(6.0, 18.0, 2.4)
     p = planner.parameters(inp)

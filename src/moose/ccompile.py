@@ -31,6 +31,10 @@ _P = ctypes.POINTER(ctypes.c_double)
 FLAGS = ("-O2", "-ffp-contract=off", "-shared", "-fPIC")
 """Compiler flags: no fused multiply-add contraction, so that a function called by another (the observer's
 fused tick, the plant's chunks) computes bit for bit what it computes alone, on every architecture."""
+COMPILE_TIMEOUT = 600.0
+"""Seconds the C compiler may take before the build counts as failed (a hung compiler).  The largest problem
+(N_p = 20, exact Hessian) took more than 120 s on a loaded machine (load average 27), which had made the build of a
+correct problem fail."""
 
 
 class CompiledFunction:
@@ -137,7 +141,7 @@ def compile_library(name: str, functions: Sequence[ca.Function], source: str = "
         built = Path(tmp) / "f.so"
         try:
             subprocess.run([compiler, *FLAGS, str(c_file), "-o", str(built), "-lm"],
-                           check=True, capture_output=True, timeout=120)
+                           check=True, capture_output=True, timeout=COMPILE_TIMEOUT)
         except (OSError, subprocess.SubprocessError):
             return None
         data = built.read_bytes()
