@@ -366,6 +366,24 @@ def test_console_script_starts_one_node_on_rclpy_with_ros_args(ros_env: dict[str
     assert "observer started" in log.read_text()
 
 
+SHUTDOWN_UNDER_THE_WAIT = textwrap.dedent(r'''
+    import json
+    import rclpy
+    from moose_ros.runtime import create_node
+    node = create_node("shutdown_probe", runtime="rclpy")
+    node.timer(0.01, lambda: None)
+    rclpy.try_shutdown()  # what rclpy's SIGINT handler does, here between a check of ok() and the next wait
+    node._turn(0.05)
+    print(json.dumps({"ok": rclpy.ok()}))
+''')
+
+
+def test_a_context_shut_down_under_the_executors_wait_ends_the_turn(ros_env: dict[str, str]) -> None:
+    """CI (load 18): SIGINT to an rclpy node landed between spin()'s check of ``ok()`` and the executor's wait, which
+    then raised RCLError ("the given context is not valid") and the node exited with a traceback, status 1."""
+    assert run_child(ros_env["MOOSE_ROS_PYTHON"], SHUTDOWN_UNDER_THE_WAIT, [], ros_env, timeout=90) == {"ok": False}
+
+
 def test_console_script_refuses_bad_arguments_with_a_clear_error(ros_env: dict[str, str]) -> None:
     """A bad value given as ROS 2 does it, a misspelt option, and --ros-args on Cyclone (which would ignore
     them): each is ``observer: error: …`` with status 2 before the node runs."""

@@ -298,6 +298,7 @@ class RclpyNode(NodeBase):
         their messages; a timer runs after the messages queued before it), then the queued messages
         in publication order."""
         from rclpy.executors import ConditionReachedException, ShutdownException, TimeoutException
+        from rclpy.impl.implementation_singleton import rclpy_implementation
         from rclpy.timer import Timer
 
         self._queue_subscriptions()
@@ -307,6 +308,10 @@ class RclpyNode(NodeBase):
                 # once they are done the condition (work was done) ends the turn instead of a new wait
                 handler, entity, _node = self._executor.wait_for_ready_callbacks(timeout, None, self._condition)
             except (TimeoutException, ConditionReachedException, ShutdownException):
+                break
+            except rclpy_implementation.RCLError:  # the context ended under the wait: rclpy's SIGINT handler shuts
+                if self._rclpy.ok():  # it down at any moment, also between spin()'s check of ok() and this wait
+                    raise
                 break
             self._worked = True
             if isinstance(entity, Timer):
