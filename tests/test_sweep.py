@@ -208,6 +208,14 @@ def _children(pid: int) -> list[int]:
         return []
 
 
+def _signal_all(pids: list[int], sig: int) -> None:
+    for pid in pids:
+        try:
+            os.kill(pid, sig)
+        except ProcessLookupError:
+            pass
+
+
 def _wait_for(predicate: Any, timeout: float, what: str) -> None:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -218,7 +226,6 @@ def _wait_for(predicate: Any, timeout: float, what: str) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.realtime  # Ctrl-C while cases are left: a race with the sweep's speed, lost beside an xdist worker
 def test_ctrl_c_keeps_finished_cases_and_resume_runs_the_rest(tmp_path: Path) -> None:
     import psutil
 
@@ -232,12 +239,25 @@ def test_ctrl_c_keeps_finished_cases_and_resume_runs_the_rest(tmp_path: Path) ->
                     "--quiet"]
     process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                start_new_session=True)
+    workers: list[int] = []
     try:
-        _wait_for(lambda: len(journal(out)) >= 3, 120, "three finished cases")
-        workers = _children(process.pid)
-        os.killpg(process.pid, signal.SIGINT)  # Ctrl-C reaches the whole foreground group
+        # the workers are held (SIGSTOP) while the journal is read, so that no case ends between the third row and
+        # Ctrl-C however long this process waits for a core: the sweep surely has cases left when it arrives
+        deadline = time.monotonic() + 120
+        while True:
+            assert time.monotonic() < deadline and process.poll() is None, "no three finished cases"
+            workers = _children(process.pid)
+            _signal_all(workers, signal.SIGSTOP)
+            if len(journal(out)) >= 3:
+                break
+            _signal_all(workers, signal.SIGCONT)
+            time.sleep(0.05)
+        assert len(journal(out)) < 24
+        os.killpg(process.pid, signal.SIGINT)  # Ctrl-C reaches the whole foreground group (the held workers too)
+        _signal_all(workers, signal.SIGCONT)
         _, err = process.communicate(timeout=60)
     finally:
+        _signal_all(workers, signal.SIGCONT)
         if process.poll() is None:
             os.killpg(process.pid, signal.SIGKILL)
             process.wait()
