@@ -78,6 +78,24 @@ def gid(guid: Any) -> list[int]:
     return list(guid.bytes[:GID_SIZE].ljust(GID_SIZE, b"\0"))
 
 
+
+MATCH_RETRIES = 10
+"""Tries of :func:`matched_subscriptions` (the count only grows while readers match: it settles at once)."""
+
+
+def matched_subscriptions(writer: Any) -> int:
+    """How many subscriptions ``writer`` is matched with.  cyclonedds-python's ``get_matched_subscriptions`` asks the
+    count, sizes a buffer for it and asks again; a reader that matches in between makes the second answer larger than
+    the buffer, and it raises IndexError (a node of the fault matrix died of it at start-up, its graph then stuck).
+    That only happens while readers are matching: ask again."""
+    for _ in range(MATCH_RETRIES - 1):
+        try:
+            return len(writer.get_matched_subscriptions())
+        except IndexError:
+            continue
+    return len(writer.get_matched_subscriptions())
+
+
 class _Timer:
     """A timer of the DDS executor: ``callback`` every ``period`` s of the node's timer clock."""
 
@@ -217,7 +235,7 @@ class DdsNode(NodeBase):
                     raise TypeError(f"cannot publish {type_name} on {full!r}: {exc} ({cause})") from None
 
         self._track("publisher", full, type_name, qos)
-        return Publisher(full, type_name, publish, lambda: len(writer.get_matched_subscriptions()))
+        return Publisher(full, type_name, publish, lambda: matched_subscriptions(writer))
 
     def subscription(self, type_name: str, topic: str, callback: Callable[[Any], None],
                      qos: Qos = QOS_DEFAULT) -> Handle:
