@@ -102,7 +102,7 @@ class ClosedLoop:
     def run(self) -> SimulationResult:
         sim, timing = self.config.simulation, self.config.timing
         dt_motion = self.config.motion_period
-        end_time = self.scenario.lead_time + self.scenario.duration
+        end_time = self.scenario.end_time
         n_motion = int(round(end_time * sim.motion_rate_hz))
         rows: list[tuple[float, ...]] = []
         planning: list[PlanningRecord] = []

@@ -156,7 +156,7 @@ def export_run(trace: Mapping[str, np.ndarray], scenario: Scenario, vehicle: Veh
                                    velocity=at.velocity, acceleration=0.0, yaw_rate=at.yaw_rate,
                                    slip_angle=at.slip_angle)
     field = scenario.field
-    end = int(round((scenario.lead_time + scenario.duration) / dt))
+    end = int(round(scenario.end_time / dt))
     past = Rectangle(field.x_max - zone.x_max, field.y_max - field.y_min,
                      center=np.array([0.5 * (zone.x_max + field.x_max) + footprint.offset,
                                       0.5 * (field.y_min + field.y_max)]))

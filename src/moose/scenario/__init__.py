@@ -94,6 +94,11 @@ class Scenario:
         """CoG position x at the start of the run (m): ``lead_time`` before :attr:`x_appear` at ``v_init``."""
         return self.x_appear - self.v_init * self.lead_time
 
+    @property
+    def end_time(self) -> float:
+        """Simulated time (s) at which a run of this scenario ends: the lead time, then ``duration`` after it."""
+        return self.lead_time + self.duration
+
     def appears(self, x: float, vx: float) -> bool:
         """Whether the obstacle has appeared for a car at (true) position ``x`` and speed ``vx``: when its
         time to collision with the near edge, (x_min − x) / v_x, has fallen to ``tau`` (or the car is

@@ -375,7 +375,7 @@ class Supervisor:
         """Wall-clock seconds the run may take.  With the simulator: its run at ``rate`` plus its start-up (it waits
         up to a minute for the nodes); in lockstep, as fast as the graph goes down to :data:`LOCKSTEP_MIN_RATE` (a
         graph that stops going ends itself: lockstep_stuck); without a simulator (the car): the planned run."""
-        planned = self.spec.scenario.lead_time + self.spec.scenario.duration
+        planned = self.spec.scenario.end_time
         if self.spec.lockstep:
             return planned / LOCKSTEP_MIN_RATE + 60.0 + STUCK_TIMEOUT
         return planned / self.spec.rate + 60.0 if self.simulated else planned

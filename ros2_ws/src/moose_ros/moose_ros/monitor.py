@@ -69,7 +69,7 @@ class Monitor:
         now = (time.monotonic(), t)
         self.pace = [self.pace[0] if self.pace else now, now]
         if self.acknowledge is not None:
-            end = self.scenario.lead_time + self.scenario.duration
+            end = self.scenario.end_time
             if tick_of(t, self.config.motion_period) % MONITOR_ACK_EVERY == 0 or t >= end - 1e-9:
                 self.acknowledge(t)
 
@@ -120,4 +120,4 @@ class Monitor:
             for t, plan, threat in self.plans
         ]
         return SimulationResult(self.scenario, planner, seed, trace, planning, self.first_threat,
-                                self.config, self.scenario.lead_time + self.scenario.duration)
+                                self.config, self.scenario.end_time)

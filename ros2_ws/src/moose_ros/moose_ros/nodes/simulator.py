@@ -228,7 +228,7 @@ class VehicleSimulator(GraphNode):
         self.sensors = Sensors(self.config.sensors, vehicle, np.random.default_rng(self.params.seed))
         self.dt = 1.0 / self.config.simulation.motion_rate_hz
         self.steps = self.config.simulation.plant_steps_per_motion
-        self.end = self.scenario.lead_time + self.scenario.duration
+        self.end = self.scenario.end_time
         self.t = 0.0
         self.appeared = False
         self.finished = False
