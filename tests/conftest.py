@@ -51,6 +51,19 @@ for sig, grace in ((signal.SIGTERM, 3.0), (signal.SIGKILL, 1.0)):
 '''
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    """The tests play Ctrl-C as a terminal sends it to its foreground job.  A test run started as a background job
+    of a script (``.ci/run &``, ``nohup``: job control off) inherits SIGINT ignored, and so does every process it
+    starts; ``moose sweep`` rightly leaves an ignored SIGINT ignored (:class:`moose.cli.common.Interrupts`) and ran
+    to its end under the Ctrl-C test (ci4; the test passed when run at a terminal).  Python's own handler is put
+    back here, in the controller and every xdist worker: the processes the tests start then get SIGINT's default
+    disposition, as at a terminal."""
+    import signal
+
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
 @pytest.fixture(scope="session", autouse=True)
 def reaper() -> Iterator[None]:
     """Every process started by this test run (and its children, whatever process group they chose) carries
