@@ -248,3 +248,40 @@ def test_a_rate_that_cannot_be_held_and_deadline_misses_are_reported() -> None:
     assert any(i["kind"] == "rate_not_held" for i in summary["incidents"])
     assert sum(summary["deadline_misses"].values()) > 0
     assert any(i["kind"] == "deadline_missed" for i in summary["incidents"])
+
+
+HANGS_ON_SIGTERM = '''
+import os, signal
+_node = os.environ.get("MOOSE_TEST_HANGING_NODE", "")
+with open("/proc/self/cmdline", "rb") as f:
+    _args = f.read().split(b"\\0")
+if _node and b"moose_ros.nodes" in _args and _node.encode() in _args:
+    _register = signal.signal
+    def _ignore_sigterm(sig, handler):  # the node's SIGTERM handler never takes effect: it hangs on the stop
+        return _register(sig, signal.SIG_IGN if sig == signal.SIGTERM else handler)
+    signal.signal = _ignore_sigterm
+'''
+
+
+def test_a_node_that_hangs_on_sigterm_shows_where_before_it_is_killed(tmp_path: Path,
+                                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    """A node that does not end within the grace after SIGTERM (an rclpy observer once did not, in CI) is killed;
+    first it writes the stack of every thread to the run's log (moose_ros.nodes.STACK_DUMP), so the log shows where
+    it hung.  The node here ignores SIGTERM (a sitecustomize of the test's, in the node's process alone)."""
+    import moose_ros.launch
+
+    (tmp_path / "sitecustomize.py").write_text(HANGS_ON_SIGTERM)
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")]))
+    monkeypatch.setenv("MOOSE_TEST_HANGING_NODE", "msf_planner")
+    monkeypatch.setattr(moose_ros.launch, "STOP_GRACE", 2.0)
+    out = io.StringIO()
+    summary = launch(load_scenario("paper_v5_tau3"), {"scenario": "paper_v5_tau3", "duration": 1.0}, out=out,
+                     lockstep=True, bag=None)
+    log = out.getvalue()
+    assert summary["node_status"]["msf_planner"] == "did not stop within 2 s of SIGTERM: killed", log[-3000:]
+    assert summary["node_exits"]["msf_planner"] == -signal.SIGKILL
+    dump = [line for line in log.splitlines() if line.startswith("[msf_planner] ")]
+    assert any("most recent call first" in line for line in dump), log[-3000:]
+    assert any("moose_ros/runtime/" in line for line in dump)  # where it waited: in its executor's spin
+    others = {n: s for n, s in summary["node_status"].items() if n != "msf_planner"}
+    assert set(others.values()) <= {"stopped", "finished"}, others

@@ -64,6 +64,7 @@ from .lockstep import (
     sensor_transit,
 )
 from .monitor import Monitor
+from .nodes import STACK_DUMP
 from .parameters import check_parameter_file, node_parameters, parameter_names
 from .process import spawn
 from .runtime import create_node, process, rclpy_missing
@@ -74,6 +75,9 @@ STOP_GRACE = 20.0
 grace only bounds a node that hangs, so it is generous: on a starved machine (a load average of 50 on 2 cores, a
 fresh-clone CI beside four other jobs) nodes of a lockstep run that ended normally needed more than 5 s, and a
 SIGKILL then made a correct run's node exits depend on the machine's speed."""
+STACK_DUMP_WAIT = 1.0
+"""Seconds a node that outlived :data:`STOP_GRACE` has to write its stacks (:data:`moose_ros.nodes.STACK_DUMP`)
+before SIGKILL."""
 DOMAIN_CHECK = 1.0
 """Seconds the launcher listens for other nodes in its DDS domain before it starts any (:func:`check_domain`)."""
 LOCKSTEP_MIN_RATE = 0.05
@@ -462,6 +466,11 @@ class Supervisor:
                 self.node.spin_once(0.05)
             except Exception:  # noqa: BLE001 - the monitor may be gone on an error path; the children still stop
                 time.sleep(0.05)
+        hung = [name for name in running if self.procs[name].poll() is None]
+        for name in hung:  # where it hangs, in the run's log (moose_ros.nodes.STACK_DUMP), then SIGKILL
+            self.procs[name].send_signal(STACK_DUMP)
+        if hung:
+            time.sleep(STACK_DUMP_WAIT)
         for name, proc in self.procs.items():
             if proc.poll() is None:
                 proc.kill()

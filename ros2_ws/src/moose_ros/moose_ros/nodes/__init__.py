@@ -12,6 +12,7 @@ moose_ros.nodes NAME …`` or, on ROS 2, ``ros2 run moose_ros NAME`` (the consol
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import importlib
 import os
 import signal
@@ -78,6 +79,7 @@ def run(name: str, argv: Sequence[str] = ()) -> int:
         rt.shutdown()
 
     signal.signal(signal.SIGTERM, terminate)
+    faulthandler.register(STACK_DUMP, all_threads=True)  # the launcher's last look at a node that hangs
     watch_parent(_parent_gone)
     try:
         node = cls(rt)
@@ -96,6 +98,11 @@ def run(name: str, argv: Sequence[str] = ()) -> int:
         rt.shutdown()
     return 0
 
+
+STACK_DUMP = signal.SIGUSR1
+"""The signal on which a node writes the Python stack of every thread to its output (:mod:`faulthandler`) and
+runs on: the launcher sends it to a node that did not end within its grace after SIGTERM, before SIGKILL, so
+that the run's log shows where it hung."""
 
 PARENT_GRACE = 3.0
 """Seconds a node whose launcher is gone has to shut down before it exits hard."""
