@@ -12,8 +12,9 @@ magic go to the file in one write, over the previous checkpoint's footer.  After
 complete MCAP file (its footer says "no summary": readers scan it), which ``mcap``'s own readers, rosbags and
 Foxglove open; ``metadata.yaml`` (rosbag2 format version 9) is rewritten with it whenever a topic was added, else
 at most every ``fsync_period`` of wall time (rosbags reads every message of the file, and lists the topics
-``metadata.yaml`` names).  The space a checkpoint needs is reserved first (``posix_fallocate``), so a full disk
-fails before anything is written and leaves the previous checkpoint's file intact.  A recorder killed with
+``metadata.yaml`` names).  The space a checkpoint needs is reserved first, without changing the file's size
+(:func:`_reserve`), so a full disk fails before anything is written and leaves the previous checkpoint's file
+intact.  A recorder killed with
 SIGKILL therefore leaves a valid bag of every message up to its last checkpoint: it loses what was in the open
 chunk (at most :data:`CHUNK_SPAN_S` of recording) and what its DDS readers still held.  The file is fsync'ed at
 a checkpoint at least every ``fsync_period`` seconds, which bounds what a power loss can take.
@@ -32,13 +33,15 @@ writer then takes no more messages.
 """
 from __future__ import annotations
 
+import ctypes
 import errno
 import os
+import sys
 import time
 from collections import defaultdict
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 import yaml
 from mcap.data_stream import RecordBuilder
@@ -60,6 +63,48 @@ CHUNK_BYTES = 1024 * 1024
 """Most uncompressed bytes of messages in a chunk (a burst closes it earlier than :data:`CHUNK_SPAN_S`)."""
 MAGIC = b"\x89MCAP0\r\n"
 """The MCAP file's opening and closing magic (MCAP specification, version 0)."""
+
+
+FALLOC_FL_KEEP_SIZE = 1
+"""Linux ``fallocate(2)``'s mode that reserves blocks without changing the file's size."""
+
+
+def _fallocate() -> Optional[Callable[..., int]]:
+    """Linux's ``fallocate`` from the C library (None elsewhere: Python's ``os`` has only ``posix_fallocate``)."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+    except OSError:
+        return None
+    function = getattr(libc, "fallocate64", None) or getattr(libc, "fallocate", None)
+    if function is not None:
+        function.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_int64, ctypes.c_int64]
+        function.restype = ctypes.c_int
+    return function
+
+
+_FALLOCATE = _fallocate()
+
+
+def _reserve(fd: int, offset: int, length: int) -> None:
+    """Reserve the blocks ``length`` bytes at ``offset`` need, so that writing them cannot fail for want of space
+    (:class:`OSError` here, on a full disk, with nothing written).  The file keeps its size (Linux,
+    :data:`FALLOC_FL_KEEP_SIZE`): ``posix_fallocate`` extends it with zeros, and a kill between that and the write
+    left a file whose end is no footer, which mcap's and rosbags' readers refuse.  ``posix_fallocate`` only where
+    that mode is missing; nothing on a file system that cannot reserve space."""
+    if _FALLOCATE is not None:
+        if _FALLOCATE(fd, FALLOC_FL_KEEP_SIZE, offset, length) == 0:
+            return
+        code = ctypes.get_errno()
+        if code not in (errno.EOPNOTSUPP, errno.ENOSYS, errno.EINVAL):
+            raise OSError(code, os.strerror(code))
+    if hasattr(os, "posix_fallocate"):
+        try:
+            os.posix_fallocate(fd, offset, length)
+        except OSError as exc:
+            if exc.errno not in (errno.EOPNOTSUPP, errno.EINVAL):  # a file system without it: write
+                raise
 
 
 def _library() -> str:
@@ -231,12 +276,7 @@ class BagWriter:
         assert self._fd is not None
         offset = self._staged.base
         try:
-            if hasattr(os, "posix_fallocate"):
-                try:
-                    os.posix_fallocate(self._fd, offset, len(data))
-                except OSError as exc:
-                    if exc.errno not in (errno.EOPNOTSUPP, errno.EINVAL):  # a file system without it: write
-                        raise
+            _reserve(self._fd, offset, len(data))
             view = memoryview(data)
             while view:
                 written = os.pwrite(self._fd, view, offset)
