@@ -7,6 +7,7 @@ with another type.  Reading must deliver every message that is there, and say wh
 """
 from __future__ import annotations
 
+import os
 import random
 import re
 import shutil
@@ -497,6 +498,91 @@ def test_a_recording_cut_between_checkpoints_is_a_bag_for_every_reader(tmp_path:
     capsys.readouterr()
     assert main(["bag", "info", str(killed)]) == 1
     assert "was not closed" in capsys.readouterr().err
+
+
+def every_reader(bag: Path) -> dict[str, Counter | str]:
+    """What each reader delivers from ``bag``: mcap's (with Foxglove's decoder), rosbags' and ours, as the
+    (topic, time) of every message, or the name of the exception with which it refuses the bag."""
+    from mcap_ros2.decoder import DecoderFactory
+
+    def mcap() -> Counter:
+        with open(next(bag.glob("*.mcap")), "rb") as handle:
+            return Counter((m.channel.topic, m.message.log_time) for m in
+                           make_reader(handle, decoder_factories=[DecoderFactory()]).iter_decoded_messages()
+                           if m.decoded_message is not None)
+
+    def rosbags() -> Counter:
+        with Reader(bag) as reader:
+            return Counter((c.topic, t) for c, t, _raw in reader.messages())
+
+    def ours() -> Counter:
+        return Counter((m.topic, m.timestamp_ns) for m in read_bag(bag, report=ReadReport(str(bag))))
+
+    found: dict[str, Counter | str] = {}
+    for read in (mcap, rosbags, ours):
+        try:
+            found[read.__name__] = read()
+        except Exception as exc:  # noqa: BLE001 - each reader refuses a bag in its own way
+            found[read.__name__] = type(exc).__name__
+    return found
+
+
+def test_a_kill_between_any_two_writes_leaves_one_bag_for_every_reader(tmp_path: Path,
+                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 25's flake: the bag of a SIGKILLed ``moose launch`` held one message more for mcap's reader than for
+    rosbags and ours.  The checkpoint that put a topic's first message on the file wrote ``metadata.yaml`` only
+    after it, and rosbags reads only the topics that names; and the space reserved for a checkpoint extended the
+    file with zeros after its footer (mcap's and rosbags' readers refused it, ours read it).  A SIGKILL lands
+    between two system calls: every state the bag passes through, before and after each of the writer's writes,
+    truncations and renames, is read by the three readers, which deliver the same messages or all refuse the bag
+    (its file still empty); and every state of a checkpoint delivers every message before it."""
+    store = typestore()
+    text = store.types["std_msgs/msg/String"]
+    bag = tmp_path / "bag"
+    states: dict[bytes, Path] = {}  # contents → a copy of the bag, each state once
+    copying = False
+
+    def snapshot() -> None:
+        nonlocal copying
+        if copying or not bag.exists():
+            return
+        copying = True
+        try:
+            files = sorted(f for f in bag.iterdir() if f.suffix != ".tmp")  # a rename makes metadata.yaml
+            key = b"".join(f.name.encode() + b"\0" + f.read_bytes() + b"\0" for f in files)
+            if key not in states:
+                states[key] = tmp_path / f"state{len(states)}"
+                states[key].mkdir()
+                for f in files:
+                    shutil.copy(f, states[key] / f.name)
+        finally:
+            copying = False
+
+    def around(call: Callable[..., Any]) -> Callable[..., Any]:
+        def wrapped(*args: Any, **kwargs: Any) -> Any:
+            snapshot()
+            try:
+                return call(*args, **kwargs)
+            finally:
+                snapshot()
+        return wrapped
+
+    for name in ("open", "pwrite", "ftruncate", "replace"):
+        monkeypatch.setattr(os, name, around(getattr(os, name)))
+    writer = BagWriter(bag, fsync_period=3600.0)
+    for t, topic in [(0.0, "/a"), (0.1, "/a"), (0.3, "/b"), (0.35, "/a"), (0.6, "/c"), (0.9, "/d")]:
+        # chunks of 0.25 s: the checkpoints before /b, /c and /d put a new topic's first message on the file, and
+        # closing puts /d's
+        writer.write(topic, "std_msgs/msg/String", int(t * 1e9), store.serialize_cdr(text(topic), text.__msgtype__))
+    writer.close()
+    monkeypatch.undo()
+    read = [every_reader(state) for state in states.values()]
+    disagree = [found for found in read if not (found["mcap"] == found["rosbags"] == found["ours"] or
+                                                all(isinstance(f, str) for f in found.values()))]
+    assert [{name: f if isinstance(f, str) else sum(f.values()) for name, f in found.items()}
+            for found in disagree] == []  # messages delivered, or the exception
+    delivered = {sum(found["ours"].values()) for found in read if isinstance(found["ours"], Counter)}
+    assert sorted(delivered) == [0, 2, 4, 5, 6]  # each checkpoint's messages, none lost
 
 
 def test_view_of_a_truncated_bag_warns_and_exits_1(tmp_path: Path, capsys: Capture) -> None:

@@ -10,14 +10,18 @@ timer, so a chunk is closed also when messages stop coming), or holds :data:`CHU
 indexes, new schema and channel records) and then a data end record, a footer without summary and the closing
 magic go to the file in one write, over the previous checkpoint's footer.  After every checkpoint the file is a
 complete MCAP file (its footer says "no summary": readers scan it), which ``mcap``'s own readers, rosbags and
-Foxglove open; ``metadata.yaml`` (rosbag2 format version 9) is rewritten with it whenever a topic was added, else
-at most every ``fsync_period`` of wall time (rosbags reads every message of the file, and lists the topics
-``metadata.yaml`` names).  The space a checkpoint needs is reserved first, without changing the file's size
-(:func:`_reserve`), so a full disk fails before anything is written and leaves the previous checkpoint's file
-intact.  A recorder killed with
-SIGKILL therefore leaves a valid bag of every message up to its last checkpoint: it loses what was in the open
-chunk (at most :data:`CHUNK_SPAN_S` of recording) and what its DDS readers still held.  The file is fsync'ed at
-a checkpoint at least every ``fsync_period`` seconds, which bounds what a power loss can take.
+Foxglove open.  ``metadata.yaml`` (rosbag2 format version 9) is rewritten before a checkpoint that adds a topic,
+naming it with the messages the file holds, and else at most every ``fsync_period`` of wall time: rosbags reads
+only the topics ``metadata.yaml`` names (every message of the file on those), mcap's reader every record of the
+file, so a topic is named before its first records reach the file (and ``metadata.yaml`` is written before the
+file's first bytes).  A kill between any two of the writer's writes leaves a bag that mcap's reader, rosbags and
+ours read message for message, or all refuse (an empty file).  The space a checkpoint needs is reserved first,
+without changing the file's size (:func:`_reserve`), so a full disk fails before anything is written and leaves
+the previous checkpoint's file intact.  A recorder killed with SIGKILL therefore leaves a valid bag of every
+message up to its last checkpoint: it loses what was in the open chunk (at most :data:`CHUNK_SPAN_S` of
+recording) and what its DDS readers still held; killed inside the checkpoint's one write (the kernel can stop a
+write between two pages), the file ends without a footer, and only our reader recovers it.  The file is fsync'ed
+at a checkpoint at least every ``fsync_period`` seconds, which bounds what a power loss can take.
 
 Schema and channel records are also written outside the chunks (the writer repeats them inside, as the mcap
 library does): a damaged chunk then never takes the definition of a topic with it.  :meth:`BagWriter.close`
@@ -192,8 +196,7 @@ class BagWriter:
         self.last_ns: int | None = None
         self.fsync_period = fsync_period
         self.chunk_span = chunk_span
-        self.saved = 0
-        """Messages on the file (up to the last checkpoint)."""
+        self._saved: dict[str, int] = {}  # messages per topic on the file (up to the last checkpoint)
         self._saved_until: Optional[int] = None
         self.failed = ""
         """Why writing stopped (a :class:`BagError` said so); "" while it works."""
@@ -201,11 +204,17 @@ class BagWriter:
         self._open_bytes = 0
         self._listed: set[str] = set()  # the topics metadata.yaml names
         self._listed_at = self._last_sync = time.monotonic()
-        try:
-            self._checkpoint(metadata=True)  # a valid, empty bag with the run's parameters from the start
+        try:  # the run's parameters from the start: metadata.yaml, then a valid, empty file
+            self._write_metadata()
+            self._checkpoint()
         except BagError:
             self.close()
             raise
+
+    @property
+    def saved(self) -> int:
+        """Messages on the file (up to the last checkpoint)."""
+        return sum(self._saved.values())
 
     def _channel(self, topic: str, type_name: str) -> int:
         known = self._channels.get(topic)
@@ -256,19 +265,27 @@ class BagWriter:
                 time.monotonic() - self._open_since[1] >= self.chunk_span:
             self._checkpoint()
 
-    def _checkpoint(self, metadata: bool = False) -> None:
+    def _checkpoint(self) -> None:
         """Close the open chunk and put everything since the last checkpoint on the file, then :data:`TAIL`."""
         self._mcap.flush()  # the open chunk and its message indexes, into the staged bytes
-        self._put(bytes(self._staged.buffer) + TAIL)
-        self._staged.base += len(self._staged.buffer)
-        self._staged.buffer.clear()
+        self._commit(TAIL)
         self._open_since, self._open_bytes = None, 0
-        self.saved, self._saved_until = sum(self.counts.values()), self.last_ns
         now = time.monotonic()
-        if metadata or set(self._channels) - self._listed or now - self._listed_at >= self.fsync_period:
+        if now - self._listed_at >= self.fsync_period:
             self._write_metadata()
         if now - self._last_sync >= self.fsync_period:
             self._sync()
+
+    def _commit(self, end: bytes, truncate: bool = False) -> None:
+        """Put the staged records, then ``end``, on the file (:meth:`_put`).  ``metadata.yaml`` names a new topic
+        before its records reach the file: rosbags reads only the topics it names, mcap's reader every record of
+        the file, so a kill between the two left messages that only mcap's reader delivered."""
+        if set(self._channels) - self._listed:
+            self._write_metadata()  # the new topics, with none of their messages on the file yet
+        self._put(bytes(self._staged.buffer) + end, truncate)
+        self._staged.base += len(self._staged.buffer)
+        self._staged.buffer.clear()
+        self._saved, self._saved_until = dict(self.counts), self.last_ns
 
     def _put(self, data: bytes, truncate: bool = False) -> None:
         """Write ``data`` at the staged base offset in one write, after reserving its space (a full disk fails
@@ -303,7 +320,7 @@ class BagWriter:
 
     def _write_metadata(self) -> None:
         """``metadata.yaml`` of what the file holds, replaced atomically."""
-        info = self.metadata()
+        info = self.metadata(on_file=True)
         try:
             tmp = self.path / "metadata.yaml.tmp"
             tmp.write_text(yaml.safe_dump({"rosbag2_bagfile_information": info}, sort_keys=True), encoding="utf-8")
@@ -312,11 +329,13 @@ class BagWriter:
             self._fail(exc)
         self._listed, self._listed_at = set(self._channels), time.monotonic()
 
-    def metadata(self) -> dict[str, Any]:
-        """The ``rosbag2_bagfile_information`` of what was written."""
-        start = self.first_ns or 0
-        duration = (self.last_ns or 0) - start
-        count = sum(self.counts.values())
+    def metadata(self, on_file: bool = False) -> dict[str, Any]:
+        """The ``rosbag2_bagfile_information`` of what was written; ``on_file``: of the messages on the file (up to
+        the last checkpoint), naming every topic written, also one none of whose messages are on the file yet."""
+        counts, last = (self._saved, self._saved_until) if on_file else (self.counts, self.last_ns)
+        start = (self.first_ns or 0) if last is not None else 0
+        duration = (last or 0) - start
+        count = sum(counts.values())
         return {
             "version": ROSBAG2_VERSION,
             "storage_identifier": "mcap",
@@ -328,7 +347,7 @@ class BagWriter:
                 {"topic_metadata": {"name": topic, "type": type_name, "serialization_format": "cdr",
                                     "offered_qos_profiles": _offered(topic),
                                     "type_description_hash": self._store.hash_rihs01(type_name)},
-                 "message_count": self.counts[topic]}
+                 "message_count": counts.get(topic, 0)}
                 for topic, (_channel, type_name) in self._channels.items()
             ],
             "compression_format": "",
@@ -349,8 +368,7 @@ class BagWriter:
                 info = self.metadata()
                 self._mcap.add_metadata("rosbag2", {"serialized_metadata": yaml.safe_dump(info, sort_keys=True)})
                 self._mcap.finish()
-                self._put(bytes(self._staged.buffer), truncate=True)
-                self.saved, self._saved_until = sum(self.counts.values()), self.last_ns
+                self._commit(b"", truncate=True)
                 self._sync()
                 self._write_metadata()
         finally:
