@@ -369,6 +369,27 @@ def test_unusable_outputs_and_devices_are_errors_not_tracebacks(capsys: pytest.C
     refused(here(capsys, *args), "moose: error: ", words)
 
 
+RELAXED_BAG = str(Path(__file__).resolve().parents[1] / "bags" / "paper_v5_tau3_combined")
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--lockstep", "nope"], "--lockstep 'nope' is invalid: expected nodes of the lockstep graph other than the "
+                             "simulator"),
+    (["--lockstep", "vehicle_simulator"], "--lockstep 'vehicle_simulator' is invalid"),
+    (["--lockstep", "observer", "observer"], "--lockstep observer observer is invalid: a node is named twice"),
+    (["--lockstep", "observer", "--rate", "2"], "--rate 2 does not apply with --lockstep"),
+    (["--lockstep", "observer", "--loop"], "--loop does not apply with --lockstep"),
+    (["--lockstep", "observer", "--lockstep-timeout", "0"], "--lockstep-timeout 0.0 is invalid"),
+    (["--lockstep", "observer", "--lockstep-timeout", "inf"], "--lockstep-timeout inf is invalid"),
+    (["--lockstep-timeout", "5"], "--lockstep-timeout 5 applies only with --lockstep"),
+])
+def test_bad_lockstep_replays_are_refused_before_joining_the_graph(capsys: pytest.CaptureFixture[str],
+                                                                   args: list[str], words: str) -> None:
+    out = here(capsys, "bag", "play", RELAXED_BAG, "--topics", "/vehicle/imu", *args)
+    refused(out, "moose: error: ", words)
+    assert "played" not in out.stdout
+
+
 def _fifo_unblocker(path: Path, after: float) -> threading.Thread:
     """Open the FIFO for writing after ``after`` s and close it: a reader blocked on it (main) gets end of file."""
     def unblock() -> None:

@@ -15,7 +15,7 @@ Parquet), :mod:`.replan` (open-loop re-planning and its figure), :mod:`.view` (b
 from .errors import BagError
 from .export import export, flatten
 from .params import RunParameters, read_run_parameters
-from .play import play
+from .play import LockstepStuck, play
 from .reader import BagMessage, BagReader, ReadReport, bag_info, read_bag
 from .record import Recorder, record_result, record_simulation
 from .replan import plot_replan, replan
@@ -23,7 +23,7 @@ from .view import plot_birdseye
 from .writer import BagWriter
 
 __all__ = [
-    "BagError", "BagMessage", "BagReader", "BagWriter", "ReadReport", "Recorder", "RunParameters", "bag_info", "export",
-    "flatten", "play", "plot_birdseye", "plot_replan", "read_bag", "read_run_parameters", "record_result",
-    "record_simulation", "replan",
+    "BagError", "BagMessage", "BagReader", "BagWriter", "LockstepStuck", "ReadReport", "Recorder", "RunParameters",
+    "bag_info", "export", "flatten", "play", "plot_birdseye", "plot_replan", "read_bag", "read_run_parameters",
+    "record_result", "record_simulation", "replan",
 ]

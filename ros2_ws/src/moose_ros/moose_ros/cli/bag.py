@@ -19,7 +19,9 @@ from moose.cli.common import check_output_file, plot_suffixes, positive_float, r
 from moose.files import OutputError
 from moose.params import ParamError
 from moose.schema import PLANNER_MODES
-from moose.verdict import EXIT_CLEAR, EXIT_FAILED
+from moose.verdict import EXIT_CLEAR, EXIT_FAILED, EXIT_INCOMPLETE
+
+from ..lockstep import STUCK_TIMEOUT
 
 
 def add_subparser(subparsers: Any) -> None:
@@ -30,13 +32,21 @@ def add_subparser(subparsers: Any) -> None:
     record.add_argument("--topics", nargs="+", help="topics to record")
     record.add_argument("--all", action="store_true", help="record every topic of the graph (default)")
     record.add_argument("--duration", type=positive_float, help="stop after this many seconds")
-    play = bag_sub.add_parser("play", help="publish a bag into the graph with its original timing")
+    play = bag_sub.add_parser("play", help="publish a bag into the graph with its original timing, or in lockstep "
+                              "with the nodes it drives")
     play.add_argument("path")
-    play.add_argument("--rate", type=positive_float, default=1.0)
+    play.add_argument("--rate", type=positive_float, help="scale the original timing (default 1: real time)")
     play.add_argument("--topics", nargs="+")
     play.add_argument("--loop", action="store_true")
     play.add_argument("--start", type=float, default=0.0, help="skip this many seconds of the bag")
     play.add_argument("--clock", action="store_true", help="publish /clock from the bag's timestamps")
+    play.add_argument("--lockstep", nargs="+", metavar="NODE",
+                      help="replay tick by tick into these nodes, started with lockstep_nodes = [vehicle_simulator, "
+                      "NODE ...]: the player takes the simulator's place and publishes the next tick once every NODE "
+                      "has reported the last (paced by the nodes, not the clock; docs/bags.md)")
+    play.add_argument("--lockstep-timeout", type=float, metavar="SECONDS",
+                      help=f"with --lockstep: give up when a node has not reported a tick (or the nodes have not "
+                      f"connected) after this many seconds, exit status 3 (default {STUCK_TIMEOUT:g})")
     info = bag_sub.add_parser("info", help="topics, types, counts, rates, duration")
     info.add_argument("path")
     export = bag_sub.add_parser("export", help="export topics to CSV or Parquet (one file per topic), or the run as a "
@@ -108,12 +118,22 @@ def cmd_bag(args: argparse.Namespace) -> int:
         elif args.bag_command == "record":
             return _record(bag, args)
         elif args.bag_command == "play":
+            from ..bag.play import check_lockstep
             from ..runtime import DdsNode
 
+            timeout = STUCK_TIMEOUT if args.lockstep_timeout is None else args.lockstep_timeout
+            if args.lockstep:
+                check_lockstep(args.lockstep, args.rate, args.loop, timeout)
+            elif args.lockstep_timeout is not None:
+                raise ParamError(f"--lockstep-timeout {args.lockstep_timeout:g} applies only with --lockstep")
             node = DdsNode("moose_bag_play")
             try:
                 sent = bag.play(args.path, node, rate=args.rate, topics=args.topics, loop=args.loop, start=args.start,
-                                clock=args.clock, report=report)
+                                clock=args.clock, report=report, lockstep=args.lockstep or (), timeout=timeout)
+            except bag.LockstepStuck as exc:
+                print(f"played {exc.sent} messages")
+                print(f"moose: error: {exc}", file=sys.stderr)
+                return EXIT_INCOMPLETE
             finally:
                 node.shutdown()
             print(f"played {sent} messages")
