@@ -8,7 +8,6 @@ import signal
 import subprocess
 import sys
 import textwrap
-import threading
 import time
 from pathlib import Path
 
@@ -18,10 +17,12 @@ from rosbags.rosbag2 import Reader
 
 from moose.config import load_config
 from moose.scenario import load_scenario
+from moose.verdict import EXIT_INCOMPLETE
 from moose_ros import convert as cv
 from moose_ros.bag import BagError, ReadReport, Recorder, bag_info, export, play, read_bag, replan
 from moose_ros.interfaces import from_rosbags
-from moose_ros.runtime import QOS_DEFAULT, DdsNode
+from moose_ros.lockstep import QOS_DATA
+from moose_ros.runtime import DdsNode
 
 ROOT = Path(__file__).resolve().parents[1]
 EXTREME = ROOT / "bags" / "paper_v7_tau1.4_combined"
@@ -154,42 +155,81 @@ def test_info_and_export(tmp_path: Path) -> None:
     assert table.num_rows == 46 and "accel_y[0]" in table.column_names and "status" in table.column_names
 
 
+SENSORS = ["/vehicle/imu", "/vehicle/gps", "/vehicle/wheel_speeds", "/vehicle/steering"]
+
+
+def _estimate(m: object) -> tuple[float, ...]:
+    """A /perception/state message as its time and every field."""
+    return (cv.time_of(m),) + tuple(float(getattr(m, f)) for f in ("x", "y", "theta", "vx", "vy", "gamma", "beta",
+                                                                    "delta"))
+
+
+def _observer(*params: str) -> subprocess.Popen:
+    """An observer node process for the relaxed case's bag (paper_v5_tau3)."""
+    return subprocess.Popen([sys.executable, "-m", "moose_ros.nodes", "observer", "--param", "scenario=paper_v5_tau3",
+                             *[a for p in params for a in ("--param", p)]], env=dict(os.environ),
+                            stdout=subprocess.DEVNULL)
+
+
 @pytest.mark.graph
 @pytest.mark.slow
-def test_replay_drives_the_observer_to_the_recorded_estimates(tmp_path: Path) -> None:
-    env = dict(os.environ)
-    observer = subprocess.Popen([sys.executable, "-m", "moose_ros.nodes", "observer", "--param", "use_sim_time=true",
-                                 "--param", "scenario=paper_v5_tau3"], env=env, stdout=subprocess.DEVNULL)
+def test_replay_in_lockstep_drives_the_observer_to_every_recorded_estimate() -> None:
+    """The example bag's sensor topics replayed in lockstep (``bag play --lockstep observer``) into a real observer
+    node process drive it to every estimate the recording holds after the first sensor sample, field for field: the
+    nodes pace the replay, so the machine's load changes how long it takes, never what is computed.  (Replayed in
+    real time, at twice its speed, at load average 21 only 701 of the 900 estimates were reproduced.)"""
     node = DdsNode("replay_test")
-    live: dict[int, tuple[float, float]] = {}
-    node.subscription("moose_msgs/msg/StateEstimate", "/perception/state",
-                      lambda m: live.__setitem__(round(cv.time_of(m) * 100), (m.vx, m.vy)), QOS_DEFAULT)
-    stop = threading.Event()
-    sensors = ["/vehicle/imu", "/vehicle/gps", "/vehicle/wheel_speeds", "/vehicle/steering"]
+    live: list[tuple[float, ...]] = []
+    # subscribed before play() subscribes to the observer's marker: the observer learns of this reader first (one
+    # participant's endpoints are announced in order), and it starts tick 0 only once its marker has its reader
+    node.subscription("moose_msgs/msg/StateEstimate", "/perception/state", lambda m: live.append(_estimate(m)),
+                      QOS_DATA)
+    observer = _observer("lockstep_nodes=[vehicle_simulator,observer]")
+    recorded = [(m.timestamp_ns, _estimate(from_rosbags(m.msg, m.type_name)))
+                for m in read_bag(RELAXED, ["/perception/state"])]
+    first = min(m.timestamp_ns for m in read_bag(RELAXED, SENSORS))
+    expected = [e for stamp, e in recorded if stamp >= first]
     try:
-        # the observer is up: its estimate's publisher and its sensor subscriptions are discovered
-        deadline = time.monotonic() + 60.0
-        while not (node.count_publishers("/perception/state") >= 1
-                   and all(node.count_subscribers(topic) >= 1 for topic in sensors)):
+        sent = play(RELAXED, node, topics=SENSORS, lockstep=["observer"], timeout=60.0)
+        deadline = time.monotonic() + 30.0  # the last tick's estimate, published before the marker play() waited for
+        while len(live) < len(expected) and time.monotonic() < deadline:
             assert observer.poll() is None, f"the observer ended (exit {observer.returncode})"
-            assert time.monotonic() < deadline, "the observer's endpoints were not discovered in 60 s"
             node.spin_once(0.05)
-        player = threading.Thread(target=play, args=(RELAXED, DdsNode("replay_player")),
-                                  kwargs={"rate": 2.0, "topics": sensors, "clock": True, "stop": stop})
-        player.start()
-        while player.is_alive():
-            node.spin_once(0.05)
-        node.spin_once(0.5)
     finally:
-        stop.set()
         observer.kill()
         observer.wait()
-    recorded = {round(cv.time_of(from_rosbags(m.msg, m.type_name)) * 100): (m.msg.vx, m.msg.vy)
-                for m in read_bag(RELAXED, ["/perception/state"])}
-    common = sorted(set(live) & set(recorded))
-    assert len(common) > 0.8 * len(recorded)
-    err = np.array([np.subtract(live[k], recorded[k]) for k in common])
-    assert np.sqrt(np.mean(err[:, 0] ** 2)) < 0.05 and np.sqrt(np.mean(err[:, 1] ** 2)) < 0.05
+        node.shutdown()
+    assert sent == 2709 and len(expected) == 900
+    assert len(live) == len(expected)
+    np.testing.assert_allclose(np.array(live), np.array(expected), rtol=0.0, atol=1e-9)
+
+
+@pytest.mark.graph
+@pytest.mark.slow
+def test_lockstep_replay_into_a_node_not_in_lockstep_stops_and_says_so() -> None:
+    """A node started without ``lockstep_nodes`` reads the replay but never reports a tick: ``bag play --lockstep``
+    gives up after ``--lockstep-timeout``, names the node and the tick, and exits with status 3 (incomplete).  (The
+    timeout also bounds the player's connection to the observer's readers, discovered on loopback in well under a
+    second: 5 s leave room for a loaded machine.)"""
+    observer = _observer("use_sim_time=true")
+    node = DdsNode("replay_probe")
+    try:
+        deadline = time.monotonic() + 60.0
+        while not all(node.count_subscribers(topic) >= 1 for topic in SENSORS):
+            assert observer.poll() is None, f"the observer ended (exit {observer.returncode})"
+            assert time.monotonic() < deadline, "the observer's subscriptions were not discovered in 60 s"
+            node.spin_once(0.05)
+        out = subprocess.run([sys.executable, "-m", "moose.cli", "bag", "play", str(RELAXED), "--topics", *SENSORS,
+                              "--lockstep", "observer", "--lockstep-timeout", "5"], capture_output=True, text=True,
+                             timeout=120)
+    finally:
+        observer.kill()
+        observer.wait()
+        node.shutdown()
+    assert out.returncode == EXIT_INCOMPLETE, (out.returncode, out.stderr[-2000:])
+    assert "moose: error: lockstep replay stuck at tick 0 (t = 0.00 s after the first message): no tick from " \
+           "observer for 5 s" in out.stderr and "Traceback" not in out.stderr
+    assert "lockstep_nodes = [vehicle_simulator, observer]" in out.stderr and "played 3 messages" in out.stdout
 
 
 def test_replan_reproduces_the_recording_and_sees_a_parameter_change(tmp_path: Path) -> None:
