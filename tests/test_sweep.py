@@ -282,6 +282,7 @@ def test_ctrl_c_keeps_finished_cases_and_resume_runs_the_rest(tmp_path: Path) ->
 
 
 @pytest.mark.slow
+@pytest.mark.realtime  # a time limit is wall-clock time: at load average 15-20 (ci1) the 0.6 s case took over 4 s
 def test_failing_cases_are_recorded_and_the_sweep_goes_on(tmp_path: Path) -> None:
     """A case that raises (a plant step the RK4 cannot integrate stably), one that outlives its time limit
     (121 simulated seconds at a 100 kHz plant step, about 9 s of work here, against 4 s) and one whose worker
