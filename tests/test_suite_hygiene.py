@@ -12,6 +12,7 @@ from typing import Optional
 import pytest
 
 TESTS = Path(__file__).resolve().parent
+ROOT = TESTS.parent
 
 
 def markers(name: str) -> list[tuple[str, int, Optional[ast.Call]]]:
@@ -137,3 +138,39 @@ def test_a_graph_tests_processes_measure_the_packages_only_they_run() -> None:
     with pytest.raises(RuntimeError, match="holds no source_pkgs"):
         children_measuring(GRAPH_COVERAGE_PACKAGES, base64.b64encode(json.dumps({"parallel": True}).encode()).decode())
 
+
+
+def test_unmeasured_graph_processes_are_those_of_the_listed_files_but_the_listed_cases(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """tests/conftest.py's choice of graph tests whose processes coverage does not measure: the files of
+    UNMEASURED_CHILDREN, but the tests of MEASURED_CASES, each a test the suite collects; with
+    MOOSE_COVERAGE_CONTEXTS=1 every graph test's processes are measured, in a context named after the test."""
+    import base64
+    import json
+    from types import SimpleNamespace
+
+    from coverage.config import CoverageConfig
+
+    from conftest import CONTEXTS, MEASURED_CASES, UNMEASURED_CHILDREN, children_config
+
+    files = sorted({case.split("::")[0] for case in MEASURED_CASES})
+    assert {Path(f).name for f in files} <= UNMEASURED_CHILDREN
+    collected = subprocess.run([sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:randomly", *files],
+                               capture_output=True, text=True, timeout=120, cwd=ROOT).stdout.splitlines()
+    assert MEASURED_CASES <= set(collected), MEASURED_CASES - set(collected)
+    config = CoverageConfig()
+    config.source_pkgs = ["moose", "moose_ros"]
+    serialised = config.serialize()
+
+    def item(nodeid: str) -> object:
+        return SimpleNamespace(nodeid=nodeid, path=ROOT / nodeid.split("::")[0])
+
+    case = sorted(MEASURED_CASES)[0]
+    unmeasured = case.split("[")[0] + "[another]"
+    monkeypatch.delenv(CONTEXTS, raising=False)
+    assert children_config(item(unmeasured), serialised) is None  # type: ignore[arg-type]
+    assert children_config(item(case), serialised) is not None  # type: ignore[arg-type]
+    assert children_config(item("tests/test_ros_graph.py::test_x"), serialised) is not None  # type: ignore[arg-type]
+    monkeypatch.setenv(CONTEXTS, "1")
+    labelled = children_config(item(unmeasured), serialised)  # type: ignore[arg-type]
+    assert labelled is not None and json.loads(base64.b64decode(labelled))["context"] == f"child:{unmeasured}"
