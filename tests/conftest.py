@@ -117,9 +117,10 @@ but for a few).  The core's planners, plant and observer run in the test process
 in the nodes doubled a graph's CPU time (the lockstep full graph: 14-16 CPU-seconds untraced, 32-35 traced)."""
 
 
-def children_measuring(packages: list[str], config: str) -> str:
+def children_measuring(packages: list[str], config: str, context: Optional[str] = None) -> str:
     """coverage.py's configuration for child processes (``config``, as coverage serialises it) measuring only
-    ``packages``; a configuration without ``source_pkgs`` is an error, not silently left as it was."""
+    ``packages`` (in the coverage context ``context``, if given); a configuration without ``source_pkgs`` is an
+    error, not silently left as it was."""
     import base64
     import json
 
@@ -128,6 +129,8 @@ def children_measuring(packages: list[str], config: str) -> str:
         raise RuntimeError(f"{COVERAGE_CHILDREN} holds no source_pkgs: coverage.py changed how it passes its "
                            "configuration to child processes (tests/conftest.py)")
     values["source_pkgs"] = packages
+    if context is not None:
+        values["context"] = context
     return base64.b64encode(json.dumps(values).encode()).decode()
 
 
@@ -156,18 +159,11 @@ def children_config(item: pytest.Item, config: str) -> Optional[str]:
     """What the processes a graph test starts measure under coverage: :data:`GRAPH_COVERAGE_PACKAGES`, nothing
     (None) for :data:`UNMEASURED_CHILDREN`, and with :data:`CONTEXTS` set, everything of those packages in a
     context of the test's own."""
-    import base64
-    import json
-
-    if os.environ.get(CONTEXTS) != "1" and item.path.name in UNMEASURED_CHILDREN \
-            and item.nodeid not in MEASURED_CASES:
+    if os.environ.get(CONTEXTS) == "1":
+        return children_measuring(GRAPH_COVERAGE_PACKAGES, config, context=f"child:{item.nodeid}")
+    if item.path.name in UNMEASURED_CHILDREN and item.nodeid not in MEASURED_CASES:
         return None
-    measured = children_measuring(GRAPH_COVERAGE_PACKAGES, config)
-    if os.environ.get(CONTEXTS) != "1":
-        return measured
-    values = json.loads(base64.b64decode(measured))
-    values["context"] = f"child:{item.nodeid}"
-    return base64.b64encode(json.dumps(values).encode()).decode()
+    return children_measuring(GRAPH_COVERAGE_PACKAGES, config)
 
 
 @pytest.hookimpl(wrapper=True)
