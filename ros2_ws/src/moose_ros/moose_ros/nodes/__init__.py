@@ -47,6 +47,12 @@ def parse_overrides(items: Sequence[str]) -> dict[str, Any]:
     return out
 
 
+STACK_DUMP = signal.SIGUSR1
+"""The signal on which a node writes the Python stack of every thread to its output (:mod:`faulthandler`) and
+runs on: the launcher sends it to a node that did not end within its grace after SIGTERM, before SIGKILL, so
+that the run's log shows where it hung."""
+
+
 def run(name: str, argv: Sequence[str] = ()) -> int:
     """Start node ``name`` and spin it until shutdown; returns the exit status."""
     from ..parameters import check_parameter_file
@@ -98,11 +104,6 @@ def run(name: str, argv: Sequence[str] = ()) -> int:
         rt.shutdown()
     return 0
 
-
-STACK_DUMP = signal.SIGUSR1
-"""The signal on which a node writes the Python stack of every thread to its output (:mod:`faulthandler`) and
-runs on: the launcher sends it to a node that did not end within its grace after SIGTERM, before SIGKILL, so
-that the run's log shows where it hung."""
 
 PARENT_GRACE = 3.0
 """Seconds a node whose launcher is gone has to shut down before it exits hard."""
