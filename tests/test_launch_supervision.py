@@ -263,6 +263,7 @@ if _node and b"moose_ros.nodes" in _args and _node.encode() in _args:
 '''
 
 
+@pytest.mark.realtime  # the other nodes must end within the 2 s grace: the wall clock (docs/testing.md)
 def test_a_node_that_hangs_on_sigterm_shows_where_before_it_is_killed(tmp_path: Path,
                                                                     monkeypatch: pytest.MonkeyPatch) -> None:
     """A node that does not end within the grace after SIGTERM (an rclpy observer once did not, in CI) is killed;
