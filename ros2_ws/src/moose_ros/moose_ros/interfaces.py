@@ -155,6 +155,9 @@ def message_class(type_name: str) -> type[Any]:
     for const_name, _kind, value in constants:
         setattr(cls, const_name, value)
     cls.ros_type = type_name
+    from .cdr import install
+
+    install(cls, type_name, store.fielddefs, message_class)  # its CDR compiled (moose_ros.cdr)
     return cls
 
 
