@@ -157,6 +157,9 @@ class DdsNode(NodeBase):
         self._writers: list[Any] = []
         self._timers: list[_Timer] = []
         self._reported: set[tuple[str, str, str]] = set()
+        self._recheck = False
+        """A topic was created since the executor's last cycle: compare every discovered endpoint again (once for
+        all the topics a node creates at start, not once per topic: reading every endpoint's QoS is slow)."""
         self._sim_now: Optional[float] = None
         self._graph_writer = self._discovery_writer()
         self._gids: dict[str, list[list[int]]] = {"reader": [], "writer": []}
@@ -187,7 +190,7 @@ class DdsNode(NodeBase):
             known = self._topics[dds_name] = Topic(self.participant, dds_name, cls)
             self._local[dds_name] = (cls.__idl_typename__, [])
         self._local[dds_name][1].append((kind, qos))
-        self._check_discovered()
+        self._recheck = True  # the endpoints already read, against this one: once, in the next executor cycle
         return known, cls, full
 
     @staticmethod
@@ -426,6 +429,9 @@ class DdsNode(NodeBase):
             self._waitset.wait(duration(seconds=wait))
         if self._guard.read():
             self._guard.set(False)
+        if self._recheck:  # endpoints of this node created since the last cycle: every remote one again
+            self._recheck = False
+            self._check_discovered()
         for _kind, _reader, condition, _alive in self._discovery:
             if condition.triggered:
                 self._check_discovered(fresh=True)
