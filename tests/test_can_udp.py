@@ -252,3 +252,30 @@ def test_no_packet_of_the_group_leaves_the_machine(exchange: dict[str, Any]) -> 
     counts = exchange["sniffed"]
     assert counts["lo"] > 100  # the watch sees the frames where they are
     assert {name: n for name, n in counts.items() if name != "lo" and n} == {}
+
+
+def test_the_bus_descriptor_to_wait_on() -> None:
+    """What the lockstep nodes wait on for frames (``moose.canbus.bus.descriptor``): the loopback multicast bus's
+    socket, readable once a frame is on the group; none for python-can's virtual bus or a closed bus."""
+    import can
+
+    from moose.canbus.bus import descriptor
+
+    group = f"239.192.{secrets.randbelow(250)}.{1 + secrets.randbelow(250)}"
+    port = claim_udp_port()
+    reader, writer = LoopbackMulticastBus(group, port), LoopbackMulticastBus(group, port)
+    try:
+        fd = descriptor(reader)
+        assert isinstance(fd, int) and fd == reader.fileno()
+        assert select.select([fd], [], [], 0.0)[0] == []
+        writer.send(can.Message(arbitration_id=0x123, data=b"\x01", is_extended_id=False))
+        assert select.select([fd], [], [], 5.0)[0] == [fd]
+    finally:
+        reader.shutdown()
+        writer.shutdown()
+    assert descriptor(reader) is None and descriptor(None) is None
+    virtual = can.Bus(interface="virtual", channel="descriptor-test")
+    try:
+        assert descriptor(virtual) is None
+    finally:
+        virtual.shutdown()

@@ -139,6 +139,31 @@ CONFORMANCE = textwrap.dedent(r'''
     selfstop.timer(0.01, lambda: (calls.append(1), selfstop.shutdown()))
     selfstop.spin(until=lambda: time.monotonic() - start > 10)
     out["shutdown"] = [time.monotonic() - start < 5, calls]
+
+    # a watched file descriptor (the CAN bus's socket): its callback runs in the executor when it is readable
+    import socket
+    watcher, (ours, theirs) = node("watcher"), socket.socketpair()
+    ours.setblocking(False)
+    seen, threads = [], []
+
+    def on_readable(take=1):
+        threads.append(threading.current_thread() is threading.main_thread())
+        seen.append(ours.recv(take))
+
+    handle = watcher.watch(ours.fileno, on_readable, 0.05)
+    watcher.spin_once(0.2)
+    quiet = list(seen)  # nothing to read: never called
+    theirs.send(b"ab")  # one byte read per call: the second wakes it again
+    spin_until(watcher, lambda: len(seen) >= 2)
+    watcher.spin_once(0.2)
+    polled = []
+    watcher.watch(lambda: None, lambda: polled.append(1), 0.01)  # no descriptor: polled
+    spin_until(watcher, lambda: len(polled) >= 3)
+    handle.cancel()
+    theirs.send(b"c")
+    watcher.spin_once(0.3)
+    out["watch"] = [quiet, [b.decode() for b in seen], all(threads), len(polled) >= 3]
+    watcher.shutdown()
     print(json.dumps(out))
 ''')
 
@@ -234,6 +259,7 @@ def test_runtimes_behave_the_same(ros_env: dict[str, str], tmp_path: Path) -> No
     assert rclpy["keep_last_5"] == [45.0, 46.0, 47.0, 48.0, 49.0]
     assert rclpy["latched"] == [7.0]
     assert rclpy["shutdown"] == [True, [1]]
+    assert rclpy["watch"] == [[], ["a", "b"], True, True]  # in the executor's thread; nothing after cancel
 
 
 def test_stock_rclpy_executor_does_not_keep_publication_order(ros_env: dict[str, str]) -> None:

@@ -152,6 +152,18 @@ SEND_TIMEOUT = 0.005
 """Longest a send may block (s): half a command period (a full SocketCAN transmit queue raises instead)."""
 
 
+def descriptor(bus: Optional[can.BusABC]) -> Optional[int]:
+    """The file descriptor to wait on for ``bus``'s frames (``select``), or ``None``: no bus, or one without a
+    descriptor (python-can's ``virtual`` bus), or a closed one."""
+    if bus is None:
+        return None
+    try:
+        fd = bus.fileno()
+    except (NotImplementedError, OSError, ValueError, AttributeError):
+        return None
+    return fd if isinstance(fd, int) and fd >= 0 else None
+
+
 class BusLink:
     """The I/O shell: opens the bus, moves frames, reports failures to ``health`` and re-opens after its back-off.
 
@@ -173,6 +185,10 @@ class BusLink:
         self.lock = lock or threading.Lock()
         self.send_timeout = send_timeout
         self.bus: Optional[can.BusABC] = None
+
+    def fileno(self) -> Optional[int]:
+        """The open bus's file descriptor (:func:`descriptor`), ``None`` while it is closed."""
+        return descriptor(self.bus)
 
     def ensure_open(self, t: float) -> Optional[can.BusABC]:
         """The open bus, opening it if the back-off allows; ``None`` while it is closed."""

@@ -77,7 +77,9 @@ node waits for every message a marker announces."""
 MATCH_RETRY = 0.02
 """Wall-clock period (s) at which a lockstep node retries a tick it could not handle yet (discovery at start)."""
 BUS_POLL = 0.001
-"""Wall-clock period (s) at which a lockstep node on the CAN bus reads its frames (no message wakes it for them)."""
+"""Wall-clock period (s) at which a lockstep node on the CAN bus reads its frames when the bus has no file descriptor
+to wait on (python-can's ``virtual`` bus); otherwise the frames wake it (:meth:`moose_ros.runtime.base.NodeBase.watch`:
+polling every millisecond cost the CAN graph's two bus parties CPU time for every wall-clock millisecond of a run)."""
 MONITORED: tuple[str, ...] = tuple(t.name for t in (ODOM, STEERING, PLAN_MPC, BLEND, THREAT, DIAGNOSTICS))
 """What the launcher's monitor reads (:meth:`moose_ros.monitor.Monitor.attach`): with ``lockstep_monitor`` a lockstep
 publisher of these waits for its reader as for the graph's, so the summary misses nothing of tick 0."""

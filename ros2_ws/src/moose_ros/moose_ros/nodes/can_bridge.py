@@ -89,7 +89,7 @@ class CanBridge(GraphNode):
         self.subscribe(ACTUATOR_COMMAND, self.on_command)
         if self.join is not None:  # the bus is read by the tick join, the frames go out in the tick
             self.join.add(BUS)
-            rt.timer(BUS_POLL, self._pump)
+            rt.watch(self.runner.link.fileno, self._pump, BUS_POLL)  # woken by the bus's frames
         else:
             rt.timer(COMMAND_PERIOD, self.tick)
         if not self.simulated:

@@ -70,6 +70,7 @@ from typing import Any, Callable, Optional
 
 import numpy as np
 
+from moose.canbus.bus import descriptor
 from moose.canbus.safety import CommandGuard, GuardParams, GuardState
 from moose.minimum_risk import ActuatorLimits, Command, MinimumRiskManeuver
 from moose.sensors import Sensors
@@ -262,7 +263,10 @@ class VehicleSimulator(GraphNode):
             self.monitor_tick = -1
             rt.subscription(TICK_TYPE, marker_topic(MONITOR), self.on_monitor, QOS_MARKER)
         if self.lockstep:  # the graph paces simulated time (moose_ros.lockstep)
-            rt.timer(BUS_POLL if self.params.vehicle_bus == "can" else MATCH_RETRY, self.lockstep_timer)
+            rt.timer(MATCH_RETRY, self.lockstep_timer)
+            io = self.io
+            if isinstance(io, CanVehicleIo):  # the bridge's frames wake it, as messages do on topics
+                rt.watch(lambda: descriptor(io.bus), self.bus_arrived, BUS_POLL)
         else:  # wall-clock pacing: one motion step every dt / rate seconds; simulated time is published on /clock
             rt.timer(self.dt / self.params.rate / 2.0, self.step)
         self.half = False
@@ -361,7 +365,7 @@ class VehicleSimulator(GraphNode):
                 if now - self.connecting > self.params.lockstep_timeout:
                     self.stuck(now - self.connecting, "the graph did not connect (a publisher without its readers)")
             return
-        self._pump()  # the bus's frames, read here (no message wakes the node for them)
+        self._pump()  # the bus's frames too, should their wake have been missed
         if self.finished:
             return
         if now - self.progress > self.params.lockstep_timeout:
@@ -370,6 +374,11 @@ class VehicleSimulator(GraphNode):
             missing = [n for n, lag in self.join.waits.items() if n in self.expected(self.t)
                        and k - lag not in self.join.markers[n]] + ([MONITOR] if self.monitor_behind(k) else [])
             self.stuck(now - self.progress, f"no tick from {', '.join(missing) or 'the graph'}")
+
+    def bus_arrived(self) -> None:
+        """Lockstep on the CAN bus: frames wait on the bus (:meth:`moose_ros.runtime.base.NodeBase.watch`)."""
+        if self.progress is not None and not self.finished:
+            self._pump()
 
     def stuck(self, waited: float, why: str) -> None:
         """Lockstep: the graph stopped reporting; end the run and say so (``lockstep_stuck``)."""

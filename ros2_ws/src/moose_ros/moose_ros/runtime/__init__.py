@@ -10,7 +10,8 @@ API (both backends, see :class:`NodeBase`):
 
 - ``create_node(name, params_file=None, overrides=None, namespace=None, runtime=None)``
 - ``publisher(type, topic, qos)`` → :class:`Publisher` (call it with a message, or ``.publish(msg)``)
-- ``subscription(type, topic, callback, qos)``, ``timer(period, callback)`` → handles with ``cancel()``
+- ``subscription(type, topic, callback, qos)``, ``timer(period, callback)``, ``watch(fileno, callback, poll)`` (a
+  file descriptor's data, e.g. the CAN bus) → handles with ``cancel()``
 - ``declare_parameter(name, default)``, ``get_parameter(name)``, ``param(name, default)``, ``parameters``
 - ``now()`` (s; simulated time when ``use_sim_time``), ``log_info/log_warn/log_error``
 - ``count_publishers(topic)``, ``count_subscribers(topic)`` (graph introspection), ``endpoints()`` (its own)

@@ -108,6 +108,56 @@ class Publisher:
         return self._count()
 
 
+class _Watch:
+    """A file descriptor watched for :meth:`NodeBase.watch`: its thread's loop and the executor's side."""
+
+    WAIT = 0.1
+    """Longest wait (s) of the thread on the descriptor or on the callback: how soon it sees a shutdown."""
+
+    def __init__(self, fileno: Callable[[], Optional[int]], callback: Callable[[], None], poll: float) -> None:
+        self.fileno, self.callback, self.poll = fileno, callback, poll
+        self.ran = threading.Event()
+        self.cancelled = False
+        self.backend: Any = None
+        """What the backend keeps for it (rclpy: its guard condition)."""
+
+    def cancel(self) -> None:
+        self.cancelled = True
+
+    def done(self) -> None:
+        """The executor's side: run the callback, then let the thread wait again."""
+        try:
+            if not self.cancelled:
+                self.callback()
+        finally:
+            self.ran.set()
+
+    def run(self, stop: threading.Event, fire: Callable[["_Watch"], None]) -> None:
+        import select
+
+        while not stop.is_set() and not self.cancelled:
+            try:
+                fd = self.fileno()
+            except (OSError, ValueError, NotImplementedError):
+                fd = None
+            if fd is None or fd < 0:
+                if stop.wait(self.poll):
+                    return
+            else:
+                try:
+                    readable, _, _ = select.select([fd], [], [], self.WAIT)
+                except (OSError, ValueError):  # closed under us: ask for the descriptor again
+                    readable = []
+                    stop.wait(self.poll)
+                if not readable:
+                    continue
+            self.ran.clear()
+            fire(self)
+            while not self.ran.wait(self.WAIT):
+                if stop.is_set() or self.cancelled:
+                    return
+
+
 class NodeBase:
     """Parameters, logging and the spin/shutdown life cycle shared by both backends."""
 
@@ -213,6 +263,28 @@ class NodeBase:
 
     def timer(self, period: float, callback: Callable[[], None]) -> Handle:
         """``callback`` every ``period`` seconds of the node's clock (simulated time with ``use_sim_time``)."""
+        raise NotImplementedError
+
+    def watch(self, fileno: Callable[[], Optional[int]], callback: Callable[[], None], poll: float) -> Handle:
+        """``callback`` whenever the file descriptor ``fileno()`` is readable: input the middleware does not carry
+        (the CAN bus's socket), called from :meth:`spin`/:meth:`spin_once` like any other callback.  A thread waits
+        on the descriptor (``select``) and wakes the executor; it waits again once the callback has run, so data the
+        callback leaves unread wakes it again at once, and read data does not.  ``fileno()`` is asked before every
+        wait (a reopened bus is watched); while it gives ``None`` (no descriptor, or the bus is closed) the callback
+        runs every ``poll`` seconds instead."""
+        watch = _Watch(fileno, callback, check_period(poll))
+        self._arm(watch)
+        thread = threading.Thread(target=watch.run, args=(self._stop, self._fire_watch), name=f"watch-{self.name}",
+                                  daemon=True)
+        thread.start()
+        return Handle(watch.cancel)
+
+    def _arm(self, watch: "_Watch") -> None:
+        """Backend: prepare to run ``watch``'s callback in the executor when :meth:`_fire_watch` is called."""
+        raise NotImplementedError
+
+    def _fire_watch(self, watch: "_Watch") -> None:
+        """Backend, from the watch's thread: run ``watch.done()`` in the executor's thread, soon."""
         raise NotImplementedError
 
     def now(self) -> float:

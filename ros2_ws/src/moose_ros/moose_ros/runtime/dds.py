@@ -41,6 +41,7 @@ import dataclasses
 import math
 import os
 import time
+from collections import deque
 from typing import Any, Callable, Optional
 
 from moose.params import ParamError
@@ -157,6 +158,8 @@ class DdsNode(NodeBase):
         self._writers: list[Any] = []
         self._timers: list[_Timer] = []
         self._reported: set[tuple[str, str, str]] = set()
+        self._fired: deque[Any] = deque()
+        """Watches (:meth:`watch`) whose descriptor became readable, appended by their threads."""
         self._recheck = False
         """A topic was created since the executor's last cycle: compare every discovered endpoint again (once for
         all the topics a node creates at start, not once per topic: reading every endpoint's QoS is slow)."""
@@ -261,6 +264,13 @@ class DdsNode(NodeBase):
                 self._waitset.detach(condition)
 
         return Handle(cancel)
+
+    def _arm(self, watch: Any) -> None:
+        pass  # a fired watch waits in _fired for the executor's next cycle
+
+    def _fire_watch(self, watch: Any) -> None:
+        self._fired.append(watch)
+        self._guard.set(True)
 
     def timer(self, period: float, callback: Callable[[], None]) -> Handle:
         timer = _Timer(period, callback, self._timer_now())
@@ -450,6 +460,8 @@ class DdsNode(NodeBase):
                 return
             callback(sample)
             self._fire_timers()
+        while self._fired and not self._stop.is_set():
+            self._fired.popleft().done()
         self._fire_timers()
 
     def _fire_timers(self) -> None:

@@ -206,6 +206,12 @@ class RclpyNode(NodeBase):
         timer = self.node.create_timer(check_period(period), callback)  # on the node's clock: sim time honoured
         return Handle(timer.cancel)
 
+    def _arm(self, watch: Any) -> None:
+        watch.backend = self.node.create_guard_condition(watch.done)  # the executor runs it when triggered
+
+    def _fire_watch(self, watch: Any) -> None:
+        watch.backend.trigger()  # rcl guard conditions may be triggered from any thread
+
     def declare_parameter(self, name: str, default: Any = None) -> Any:
         from rcl_interfaces.msg import ParameterDescriptor
 
