@@ -87,6 +87,11 @@ BUGS = (
         "src/moose/planner/fbl.py",
         (("self._axles = Axles.of(vehicle, vehicle.mu)", "self._axles = Axles.of(vehicle, 0.9)"),),
         ("tests/test_weight.py",)),
+    # the compiled CDR of the DDS messages: every message of the graph goes through it
+    Bug("cdr-xcdr2-alignment", "the compiled CDR aligns 8-byte fields to 4 (XCDR2's rule, not XCDR1's)",
+        "ros2_ws/src/moose_ros/moose_ros/cdr.py",
+        (("                align = min(_size(code), 8)\n", "                align = min(_size(code), 4)\n"),),
+        ("tests/test_cdr.py",)),
 )
 
 
