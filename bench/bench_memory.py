@@ -65,19 +65,18 @@ def maps(pid: int, *needles: str) -> dict[str, bool]:
 
 
 def node_children() -> dict[str, int]:
-    """Node name → pid of this process's children that run a node (``python -m moose_ros.nodes NAME``)."""
+    """Node name → pid of the processes below this one that run a node (``python -m moose_ros.nodes NAME``: exec'd,
+    or forked by the run's fork server, which shows its children so)."""
+    from moose_ros.process import descendants
+
     found: dict[str, int] = {}
-    me = os.getpid()
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
+    for pid in descendants(os.getpid()):
         try:
-            ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
-            argv = (entry / "cmdline").read_bytes().split(b"\0")
-        except (OSError, IndexError, ValueError):
+            argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+        except OSError:
             continue
-        if ppid == me and b"moose_ros.nodes" in argv:
-            found[argv[argv.index(b"moose_ros.nodes") + 1].decode()] = int(entry.name)
+        if b"moose_ros.nodes" in argv:
+            found[argv[argv.index(b"moose_ros.nodes") + 1].decode()] = pid
     return found
 
 

@@ -251,14 +251,14 @@ def test_a_rate_that_cannot_be_held_and_deadline_misses_are_reported() -> None:
 
 
 HANGS_ON_SIGTERM = '''
-import os, signal
+import os, signal, sys
 _node = os.environ.get("MOOSE_TEST_HANGING_NODE", "")
-with open("/proc/self/cmdline", "rb") as f:
-    _args = f.read().split(b"\\0")
-if _node and b"moose_ros.nodes" in _args and _node.encode() in _args:
+if _node:
     _register = signal.signal
-    def _ignore_sigterm(sig, handler):  # the node's SIGTERM handler never takes effect: it hangs on the stop
-        return _register(sig, signal.SIG_IGN if sig == signal.SIGTERM else handler)
+    def _ignore_sigterm(sig, handler):  # that node's SIGTERM handler never takes effect: it hangs on the stop
+        hang = (sig == signal.SIGTERM and sys.argv[1:2] == [_node]
+                and sys.argv[0].endswith(os.path.join("moose_ros", "nodes", "__main__.py")))
+        return _register(sig, signal.SIG_IGN if hang else handler)
     signal.signal = _ignore_sigterm
 '''
 
@@ -268,7 +268,8 @@ def test_a_node_that_hangs_on_sigterm_shows_where_before_it_is_killed(tmp_path: 
                                                                     monkeypatch: pytest.MonkeyPatch) -> None:
     """A node that does not end within the grace after SIGTERM (an rclpy observer once did not, in CI) is killed;
     first it writes the stack of every thread to the run's log (moose_ros.nodes.STACK_DUMP), so the log shows where
-    it hung.  The node here ignores SIGTERM (a sitecustomize of the test's, in the node's process alone)."""
+    it hung.  The node here ignores SIGTERM (a sitecustomize of the test's, in the processes the launcher starts:
+    it acts in the process of ``python -m moose_ros.nodes msf_planner`` alone, forked or not)."""
     import moose_ros.launch
 
     (tmp_path / "sitecustomize.py").write_text(HANGS_ON_SIGTERM)

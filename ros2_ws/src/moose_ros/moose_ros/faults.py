@@ -18,13 +18,13 @@ from __future__ import annotations
 import dataclasses
 import re
 import signal
-import subprocess
 import time
 from typing import Callable, Literal, Optional, Sequence
 
 from moose.params import ParamError
 
 from .incidents import IncidentLog
+from .process import Child
 
 FAULT_SYNTAX = re.compile(r"^(?P<node>[a-z_]+):(?P<action>kill|stall)@(?P<at>[0-9.]+)(?::(?P<duration>[0-9.]+))?$")
 
@@ -65,7 +65,7 @@ class Fault:
 class FaultInjector:
     """Applies faults to the node processes at their times; records each one."""
 
-    def __init__(self, faults: Sequence[Fault], procs: dict[str, subprocess.Popen], rate: float, log: IncidentLog,
+    def __init__(self, faults: Sequence[Fault], procs: dict[str, Child], rate: float, log: IncidentLog,
                  say: Callable[[str], None], tick: Optional[float] = None) -> None:
         self.pending = sorted(faults, key=lambda f: f.at)
         self.procs, self.rate, self.log, self.say = procs, rate, log, say

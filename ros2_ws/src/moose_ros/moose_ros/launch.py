@@ -1,6 +1,7 @@
 """Launch the node graph as separate OS processes without ROS 2 (``moose launch``).
 
-Each node runs as ``python -m moose_ros.nodes NAME``, started by :func:`moose_ros.process.spawn` (it dies
+Each node runs as ``python -m moose_ros.nodes NAME``, forked by the run's fork server (:mod:`moose_ros.forkserver`:
+the imports and message classes every node needs, done once) or started by :func:`moose_ros.process.spawn` (it dies
 with the launcher, even a SIGKILLed one); their output is streamed with a ``[name]`` prefix.  ``runtime``
 chooses what the nodes run on (:mod:`moose_ros.runtime`: ``rclpy`` or ``dds``, for all or per node; default:
 this interpreter's); a node on rclpy that this interpreter cannot run is started with the interpreter and
@@ -50,6 +51,7 @@ from moose.verdict import exit_status
 from .bag import Recorder
 from .bag.params import RunParameters
 from .faults import Fault, FaultInjector
+from .forkserver import ForkServer
 from .graph import DIAGNOSTICS, GRAPHS, NODES
 from .incidents import RATE_TOLERANCE
 from .live import LiveView
@@ -65,8 +67,9 @@ from .lockstep import (
 )
 from .monitor import Monitor
 from .nodes import STACK_DUMP
+from .nodes import __name__ as NODES_MODULE
 from .parameters import check_parameter_file, node_parameters, parameter_names
-from .process import spawn
+from .process import Child, spawn
 from .runtime import create_node, process, rclpy_missing
 from .runtime.base import NodeBase, set_dotted
 
@@ -262,7 +265,7 @@ class Supervisor:
         config = spec.scenario.configure(with_overrides(load_config(spec.params_file, reader=None), shared))
         self.monitor = Monitor(spec.scenario, config)
         self.log = self.monitor.log
-        self.procs: dict[str, subprocess.Popen[str]] = {}
+        self.procs: dict[str, Child] = {}
         self.last_lines: dict[str, list[str]] = {}
         """Each node's last three lines of output (a node that fails to start is reported with them)."""
         self.exits: dict[str, int] = {}
@@ -280,8 +283,22 @@ class Supervisor:
                                       tick=self.monitor.config.motion_period if spec.lockstep else None)
         self.recorder: Optional[Recorder] = None
         self.live: Optional[LiveView] = None
-        self.node = create_node(MONITOR, overrides={"use_sim_time": False}, runtime=self.runtimes[MONITOR])
-        """The monitor's node (created last: nothing else here holds a resource that needs closing)."""
+        self.forks = self.fork_server()
+        try:
+            self.node = create_node(MONITOR, overrides={"use_sim_time": False}, runtime=self.runtimes[MONITOR])
+            """The monitor's node (created last: nothing else here but the fork server holds a resource that
+            needs closing)."""
+        except BaseException:
+            if self.forks is not None:
+                self.forks.close()
+            raise
+
+    def fork_server(self) -> Optional[ForkServer]:
+        """The run's :class:`moose_ros.forkserver.ForkServer`, preloading for the nodes on our Cyclone runtime under
+        this interpreter (started now, so that its preload overlaps the domain check); None when there are none."""
+        forked = [name for name, (python, env) in self.children.items()
+                  if python == sys.executable and env["MOOSE_RUNTIME"] == "dds"]
+        return ForkServer(forked, self.children[forked[0]][1]) if forked else None
 
     def open(self, bag: Optional[Union[str, Path]], foxglove: Optional[tuple[str, int]]) -> None:
         """The domain check on the monitor's node (:func:`check_domain`), the recorder of ``bag`` and the live view
@@ -303,6 +320,8 @@ class Supervisor:
             if self.recorder is not None:
                 self.recorder.close()
             self.node.shutdown()
+            if self.forks is not None:
+                self.forks.close()
             raise
 
     @contextlib.contextmanager
@@ -354,19 +373,25 @@ class Supervisor:
             self.node.spin_once(0.02)
 
     def start_nodes(self) -> None:
-        """Every node as ``python -m moose_ros.nodes NAME`` with its parameters, its output streamed."""
+        """Every node as ``python -m moose_ros.nodes NAME`` with its parameters, its output streamed: forked by the
+        fork server when it can (:meth:`fork_server`), else started by ``exec``."""
         for name, given in self.overrides.items():
             python, env = self.children[name]
-            cmd = [python, "-m", "moose_ros.nodes", name]
+            args = [name]
             if self.spec.params_file:
-                cmd += ["--params", self.spec.params_file]
+                args += ["--params", self.spec.params_file]
             for key, value in given.items():
-                cmd += ["--param", f"{key}={json.dumps(value)}"]
-            proc = spawn(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                args += ["--param", f"{key}={json.dumps(value)}"]
+            proc: Child
+            if self.forks is not None and self.forks.serves(python, env):
+                proc = self.forks.start(NODES_MODULE, args)
+            else:
+                proc = spawn([python, "-m", NODES_MODULE, *args], env=env, stdout=subprocess.PIPE,
+                             stderr=subprocess.STDOUT, text=True)
             self.procs[name] = proc
             threading.Thread(target=self.stream, args=(name, proc), daemon=True).start()
 
-    def stream(self, name: str, proc: subprocess.Popen[str]) -> None:
+    def stream(self, name: str, proc: Child) -> None:
         """A node's output, each line prefixed with ``[name]`` (in a thread of its own, to the node's end)."""
         assert proc.stdout is not None
         for line in proc.stdout:
@@ -446,6 +471,8 @@ class Supervisor:
         self.stop_children()
         if self.live is not None:
             self.live.close()
+        if self.forks is not None:
+            self.forks.close()
         self.node.shutdown()
         if self.recorder is not None:
             self.recorder.close()
@@ -472,13 +499,13 @@ class Supervisor:
         if hung:
             time.sleep(STACK_DUMP_WAIT)
         for name, proc in self.procs.items():
-            if proc.poll() is None:
+            code = proc.poll()
+            if code is None:
                 proc.kill()
-                proc.wait()
+                code = proc.wait()
                 if name in running:
                     self.ends[name] = f"did not stop within {STOP_GRACE:g} s of SIGTERM: killed"
                     self.log.add(self.monitor.sim_time, name, "died", self.ends[name])
-            code = proc.returncode
             self.exits.setdefault(name, code)
             if name in running and name not in self.ends:
                 if code == 0:

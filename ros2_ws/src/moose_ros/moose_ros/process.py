@@ -31,7 +31,7 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping, Optional, Sequence
+from typing import IO, Any, Callable, Iterable, Mapping, Optional, Protocol, Sequence
 
 PARENT_ENV = "MOOSE_PARENT_PID"
 """Environment variable with the id of the process that spawned a child (:func:`spawn`)."""
@@ -51,6 +51,28 @@ if os.getppid() != parent:
 os.execvp(sys.argv[2], sys.argv[2:])
 """
 """Runs in the child before the command: the parent-death signal, the race check, ``exec``."""
+
+
+class Child(Protocol):
+    """What the launcher uses of a node's process: a :class:`subprocess.Popen` of :func:`spawn`, or a
+    :class:`moose_ros.forkserver.ForkedProcess`."""
+
+    @property
+    def pid(self) -> int: ...
+
+    @property
+    def returncode(self) -> Optional[int]: ...
+
+    @property
+    def stdout(self) -> Optional[IO[str]]: ...
+
+    def poll(self) -> Optional[int]: ...
+
+    def wait(self, timeout: Optional[float] = None) -> int: ...
+
+    def send_signal(self, sig: int) -> None: ...
+
+    def kill(self) -> None: ...
 
 
 def spawn(cmd: Sequence[str], env: Optional[Mapping[str, str]] = None, **popen: Any) -> subprocess.Popen:
@@ -97,7 +119,7 @@ def watch_parent(on_exit: Callable[[], None], poll: float = 0.2) -> Optional[thr
     return thread
 
 
-def stop(procs: Iterable[subprocess.Popen], grace: float = 5.0) -> dict[int, int]:
+def stop(procs: Iterable[Child], grace: float = 5.0) -> dict[int, int]:
     """End ``procs``: SIGCONT and SIGTERM to each one still running, SIGKILL to those alive after ``grace``
     seconds; returns pid → exit status (negative: the signal that ended it)."""
     procs = list(procs)
@@ -109,13 +131,14 @@ def stop(procs: Iterable[subprocess.Popen], grace: float = 5.0) -> dict[int, int
                 except ProcessLookupError:
                     pass
     deadline = time.monotonic() + grace
+    codes = {}
     for proc in procs:
         try:
-            proc.wait(timeout=max(0.0, deadline - time.monotonic()))
+            codes[proc.pid] = proc.wait(timeout=max(0.0, deadline - time.monotonic()))
         except subprocess.TimeoutExpired:
             proc.kill()
-            proc.wait()
-    return {proc.pid: proc.returncode for proc in procs}
+            codes[proc.pid] = proc.wait()
+    return codes
 
 
 def descendants(pid: int) -> list[int]:

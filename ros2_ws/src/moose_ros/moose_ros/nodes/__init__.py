@@ -3,7 +3,8 @@
 One module per node (``simulator``, ``observer``, ``detector``, ``planner``, ``weight_fbl``,
 ``motion``, ``can_bridge``; :mod:`.base` holds what they share).  A node's module is imported only
 when that node starts (:data:`moose_ros.graph.NODES` names it), so each process loads only what its
-job needs: the CAN bridge and the motion controller never load CasADi or the planners.
+job needs: the CAN bridge and the motion controller never load CasADi or the planners (under ``moose launch``
+the nodes are forked from a server that loaded what the whole graph needs once: :mod:`moose_ros.forkserver`).
 
 Run one with ``moose node NAME [--params FILE] [--param key=value ...]``, ``python -m
 moose_ros.nodes NAME …`` or, on ROS 2, ``ros2 run moose_ros NAME`` (the console script
