@@ -410,6 +410,50 @@ def test_a_context_shut_down_under_the_executors_wait_ends_the_turn(ros_env: dic
     assert run_child(ros_env["MOOSE_ROS_PYTHON"], SHUTDOWN_UNDER_THE_WAIT, [], ros_env, timeout=90) == {"ok": False}
 
 
+INCOMPATIBLE_QOS = textwrap.dedent(r'''
+    import json, os, sys, time
+    from moose_ros.runtime import QOS_DEFAULT, QOS_SENSOR, create_node
+    WHEELS = "moose_msgs/msg/WheelSpeeds"
+    read, write = os.pipe()  # the log (rcutils writes to file descriptor 2), read here
+    os.set_blocking(read, False)
+    stderr = os.dup(2)
+    os.dup2(write, 2)
+    log = b""
+    try:
+        offer, request = create_node("qos_offer", runtime="rclpy"), create_node("qos_request", runtime="rclpy")
+        offer.publisher(WHEELS, "/rt_test/qos", QOS_SENSOR)  # best effort
+        request.publisher(WHEELS, "/rt_test/other")
+        for n in (offer, request):  # a first wait with their event handlers: the next is a second later
+            n.spin_once(0.05)
+        request.subscription(WHEELS, "/rt_test/qos", print, QOS_DEFAULT)  # reliable: both sides' event is now
+        deadline = time.monotonic() + float(sys.argv[1])
+        while time.monotonic() < deadline and log.count(b"incompatible QoS") < 2:
+            for n in (offer, request):
+                n.spin_once(0.02)
+            try:
+                log += os.read(read, 65536)
+            except BlockingIOError:
+                pass
+        for n in (offer, request):
+            n.shutdown()
+    finally:
+        os.dup2(stderr, 2)
+        sys.stderr.write(log.decode())
+    print(json.dumps(sorted(line.split("]: ", 1)[-1] for line in log.decode().splitlines() if "incompatible" in line)))
+''')
+
+
+def test_an_incompatible_qos_is_logged_on_both_sides(ros_env: dict[str, str]) -> None:
+    """rclpy's warnings for a remote endpoint with an incompatible QoS (its default event handlers, which the
+    runtime gathers into one waitable that joins a wait once a second) reach the log of both nodes, also when the
+    endpoints meet between two waits with the handlers."""
+    assert run_child(ros_env["MOOSE_ROS_PYTHON"], INCOMPATIBLE_QOS, ["60"], ros_env, timeout=90) == [
+        "New publisher discovered on topic '/rt_test/qos', offering incompatible QoS. No messages will be received "
+        "from it. Last incompatible policy: RELIABILITY",
+        "New subscription discovered on topic '/rt_test/qos', requesting incompatible QoS. No messages will be sent "
+        "to it. Last incompatible policy: RELIABILITY"]
+
+
 def test_console_script_refuses_bad_arguments_with_a_clear_error(ros_env: dict[str, str]) -> None:
     """A bad value given as ROS 2 does it, a misspelt option, and --ros-args on Cyclone (which would ignore
     them): each is ``observer: error: …`` with status 2 before the node runs."""

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import functools
 import itertools
 import os
 import time
@@ -58,6 +59,86 @@ refused ``set_parameters`` gives)."""
 MAX_TAKE = 64
 """Messages taken from one subscription per executor turn at most, as the DDS executor takes at most
 ``max(depth, 64)`` samples per reader and turn (keep-last depths bound it first)."""
+
+
+EVENT_PERIOD = 1.0
+"""Wall-clock seconds (monotonic) between the executor's waits that include the node's QoS event handlers (an
+incompatible QoS or type reported by the middleware is logged at most about this much later than rclpy logs it)."""
+
+
+@functools.cache
+def _events_class() -> Any:
+    """The class of :class:`RclpyNode`'s event waitable (a subclass of rclpy's ``Waitable``, defined once rclpy is
+    imported, when the first node is made)."""
+    from rclpy.waitable import NumberOfEntities, Waitable
+
+    class Events(Waitable):
+        """The QoS event handlers rclpy makes by default for each publisher and subscription of the node's (they
+        log a remote endpoint's incompatible QoS or type), as one waitable that joins a wait at most every
+        :data:`EVENT_PERIOD`.  rclpy's executor builds a new wait set for every wait, in Python, at a cost per
+        waitable (enter, count, add, ask whether ready, leave): two handlers per endpoint cost a node of the graph
+        more CPU time than the rest of each wait (docs/ros2.md, Runtime).  An event that happens meanwhile stays
+        pending in the middleware and is taken at the next wait that includes it.  Handlers and callbacks are
+        rclpy's own (``PublisherEventCallbacks``, ``SubscriptionEventCallbacks``): the warnings are the same.  The
+        endpoints rclpy makes itself (``/parameter_events``, the time source's ``/clock``) keep theirs."""
+
+        def __init__(self, group: Any) -> None:
+            super().__init__(group)
+            self._handlers: tuple[Any, ...] = ()  # replaced, never changed: a wait keeps the one it entered
+            self._waiting: tuple[Any, ...] = ()  # the handlers of the current wait
+            self._ready: list[Any] = []
+            self._due = 0.0  # time.monotonic() from which the next wait includes the handlers
+
+        def add(self, callbacks: Any, entity: Any) -> list[Any]:
+            """Wait on the handlers that rclpy's ``callbacks`` class (``PublisherEventCallbacks`` or
+            ``SubscriptionEventCallbacks``) makes by default for ``entity`` (a publisher or subscription made
+            without them) too; returns them."""
+            handlers = callbacks().create_event_handlers(self.callback_group, entity.handle, entity.topic)
+            self._handlers += tuple(handlers)
+            return handlers
+
+        def remove(self, handlers: list[Any]) -> None:
+            """Stop waiting on ``handlers`` and destroy them (once no wait uses them)."""
+            self._handlers = tuple(h for h in self._handlers if h not in handlers)
+            for handler in handlers:
+                handler.destroy()
+
+        def destroy(self) -> None:
+            """Destroy every handler (before the node)."""
+            self.remove(list(self._handlers))
+
+        def __enter__(self) -> None:
+            now = time.monotonic()
+            self._waiting = self._handlers if now >= self._due else ()
+            if self._waiting:
+                self._due = now + EVENT_PERIOD
+            for handler in self._waiting:
+                handler.__enter__()
+
+        def __exit__(self, *exc: Any) -> None:
+            for handler in self._waiting:
+                handler.__exit__(*exc)
+
+        def get_num_entities(self) -> Any:
+            return NumberOfEntities(num_events=len(self._waiting))
+
+        def add_to_wait_set(self, wait_set: Any) -> None:
+            for handler in self._waiting:
+                handler.add_to_wait_set(wait_set)
+
+        def is_ready(self, wait_set: Any) -> bool:
+            self._ready = [handler for handler in self._waiting if handler.is_ready(wait_set)]
+            return bool(self._ready)
+
+        def take_data(self) -> list[tuple[Any, Any]]:
+            ready, self._ready = self._ready, []
+            return [(handler, handler.take_data()) for handler in ready]
+
+        async def execute(self, taken: list[tuple[Any, Any]]) -> None:
+            for handler, data in taken:
+                await handler.execute(data)
+
+    return Events
 
 
 class RclpyNode(NodeBase):
@@ -105,6 +186,8 @@ class RclpyNode(NodeBase):
         self._freeze_parameters()
         if self.use_sim_time:  # rclpy's time source reads /clock with this QoS (as the DDS backend's reader)
             self._track("subscription", CLOCK_TOPIC, CLOCK_TYPE, QOS_CLOCK_READER)
+        self._events = _events_class()(self.node.default_callback_group)
+        self.node.add_waitable(self._events)
         self._executor = SingleThreadedExecutor()
         self._executor.add_node(self.node)
         self._pending: list[tuple[int, int, int, Callable[[Any], None], Any]] = []
@@ -185,7 +268,11 @@ class RclpyNode(NodeBase):
     def publisher(self, type_name: str, topic: str, qos: Qos = QOS_DEFAULT) -> Publisher:
         cls = self._class(type_name)
         full = self.resolve(topic)
-        pub = self.node.create_publisher(cls, full, self._qos(qos))
+        from rclpy.event_handler import PublisherEventCallbacks
+
+        pub = self.node.create_publisher(cls, full, self._qos(qos),
+                                         event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
+        self._events.add(PublisherEventCallbacks, pub)
 
         def publish(msg: Any) -> None:
             if type(msg) is not cls:
@@ -197,10 +284,19 @@ class RclpyNode(NodeBase):
 
     def subscription(self, type_name: str, topic: str, callback: Callable[[Any], None],
                      qos: Qos = QOS_DEFAULT) -> Handle:
+        from rclpy.event_handler import SubscriptionEventCallbacks
+
         full = self.resolve(topic)
-        sub = self.node.create_subscription(self._class(type_name), full, callback, self._qos(qos))
+        sub = self.node.create_subscription(self._class(type_name), full, callback, self._qos(qos),
+                                            event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
+        handlers = self._events.add(SubscriptionEventCallbacks, sub)
         self._track("subscription", full, type_name, qos)
-        return Handle(lambda: self.node.destroy_subscription(sub))
+
+        def cancel() -> None:
+            self._events.remove(handlers)
+            self.node.destroy_subscription(sub)
+
+        return Handle(cancel)
 
     def timer(self, period: float, callback: Callable[[], None]) -> Handle:
         timer = self.node.create_timer(check_period(period), callback)  # on the node's clock: sim time honoured
@@ -361,6 +457,7 @@ class RclpyNode(NodeBase):
         """Destroy the node and its executor (and the rclpy context if this node created it)."""
         self._executor.remove_node(self.node)
         self._executor.shutdown()
+        self._events.destroy()
         self.node.destroy_node()
         if self._owns_context:
             self._rclpy.try_shutdown()
