@@ -395,32 +395,49 @@ class RclpyNode(NodeBase):
                 return
             callback(msg)
 
+    def _next(self, timeout: float, nodes: Optional[list[Any]] = None,
+              condition: Callable[[], bool] = lambda: False) -> Optional[tuple[Any, Any]]:
+        """rclpy's executor's next ready entity, ``(handler, entity)``, waiting up to ``timeout`` s on ``nodes`` (all
+        of the executor's if ``None``); ``None`` once the wait found nothing more, ``condition()`` is true, or the
+        executor or its context was shut down."""
+        from rclpy.executors import ConditionReachedException, ShutdownException, TimeoutException
+        from rclpy.impl.implementation_singleton import rclpy_implementation
+
+        try:
+            handler, entity, _node = self._executor.wait_for_ready_callbacks(timeout, nodes, condition)
+        except (TimeoutException, ConditionReachedException, ShutdownException):
+            return None
+        except rclpy_implementation.RCLError:  # the context ended under the wait: rclpy's SIGINT handler shuts it
+            if self._rclpy.ok():  # down at any moment, also between spin()'s check of ok() and this wait
+                raise
+            return None
+        return handler, entity
+
     def _turn(self, timeout: float) -> None:
         """Wait up to ``timeout`` s for work, run what that one wait found ready (subscriptions queue
         their messages; a timer runs after the messages queued before it), then the queued messages
         in publication order."""
-        from rclpy.executors import ConditionReachedException, ShutdownException, TimeoutException
-        from rclpy.impl.implementation_singleton import rclpy_implementation
         from rclpy.timer import Timer
 
         self._queue_subscriptions()
         self._worked = False
         while not self._stop.is_set():
-            try:  # the same arguments each call: rclpy goes on through one wait's ready entities, and
-                # once they are done the condition (work was done) ends the turn instead of a new wait
-                handler, entity, _node = self._executor.wait_for_ready_callbacks(timeout, None, self._condition)
-            except (TimeoutException, ConditionReachedException, ShutdownException):
+            # the same arguments each call: rclpy goes on through one wait's ready entities, and once they
+            # are done the condition (work was done) ends the turn instead of a new wait
+            ready = self._next(timeout, None, self._condition)
+            if ready is None:
                 break
-            except rclpy_implementation.RCLError:  # the context ended under the wait: rclpy's SIGINT handler shuts
-                if self._rclpy.ok():  # it down at any moment, also between spin()'s check of ok() and this wait
-                    raise
-                break
+            handler, entity = ready
             self._worked = True
             if isinstance(entity, Timer):
                 self._flush()
             handler()
             if handler.exception() is not None:
                 raise handler.exception()
+        if self._worked:  # rclpy's handlers trigger the executor's guard condition (for a multi-threaded executor to
+            # wait on their entities again): a wait on no node takes that wake-up for a fraction of the cost of the
+            # full wait set, which the next turn's wait would build to find nothing else ready
+            self._next(0.0, [])
         self._flush()
 
     def spin_once(self, timeout: float) -> None:
