@@ -287,3 +287,40 @@ def test_a_node_that_hangs_on_sigterm_shows_where_before_it_is_killed(tmp_path: 
     assert any("moose_ros/runtime/" in line for line in dump)  # where it waited: in its executor's spin
     others = {n: s for n, s in summary["node_status"].items() if n != "msf_planner"}
     assert set(others.values()) <= {"stopped", "finished"}, others
+
+
+TEARDOWN_HANGS = '''
+import time
+import moose_ros.nodes
+from moose_ros.runtime.dds import DdsNode
+moose_ros.nodes.TEARDOWN_GRACE = 1.0
+DdsNode._release = lambda self: time.sleep(3600)  # the middleware's teardown never returns
+'''
+
+
+def test_a_node_whose_middleware_teardown_hangs_exits_and_says_where(tmp_path: Path) -> None:
+    """The node's work is done once it stops; a teardown that never returns (rclpy's destroy_node in Fast DDS,
+    once in ~20 launches) ends the process with status 0 after moose_ros.nodes.TEARDOWN_GRACE, with every thread's
+    stack and a line saying so in its output, instead of running into the launcher's SIGKILL."""
+    (tmp_path / "sitecustomize.py").write_text(TEARDOWN_HANGS)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")]),
+           "MOOSE_RUNTIME": "dds"}
+    node = spawn([sys.executable, "-m", "moose_ros.nodes", "observer", "--param", "scenario=paper_v5_tau3"], env=env,
+                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        assert node.stdout is not None
+        lines = []
+        for line in node.stdout:
+            lines.append(line)
+            if "observer started" in line:
+                break
+        assert any("observer started" in line for line in lines), "".join(lines)
+        node.send_signal(signal.SIGTERM)
+        out, _ = node.communicate(timeout=60)
+    finally:
+        if node.poll() is None:
+            node.kill()
+            node.wait()
+    assert node.returncode == 0, out[-3000:]
+    assert "observer: the middleware's teardown did not end within 1 s (stacks above): exiting" in out, out[-3000:]
+    assert "sitecustomize.py" in out  # where it hung: the stack of the main thread, in the never-ending teardown

@@ -83,6 +83,7 @@ def run(name: str, argv: Sequence[str] = ()) -> int:
             node.publish_diagnostics()  # the final counters reach the launcher
         except Exception:  # noqa: BLE001 - the node is going anyway
             pass
+        _teardown_watchdog(name)
         rt.shutdown()
 
     signal.signal(signal.SIGTERM, terminate)
@@ -102,8 +103,36 @@ def run(name: str, argv: Sequence[str] = ()) -> int:
     finally:
         node.message = "stopped"
         node.close()
+        _teardown_watchdog(name)
         rt.shutdown()
     return 0
+
+
+TEARDOWN_GRACE = 10.0
+"""Seconds a node may take to end once it is stopping (SIGTERM after its last status, or its spin over): rclpy's
+``destroy_node`` hung in Fast DDS's participant deletion in about one launch of twenty (ros2/rclpy#456 and
+ros2/build_cop#248 are of its kind), so a node that ended normally was killed at the launcher's grace
+(``moose_ros.launch.STOP_GRACE``, longer) and the run counted as degraded."""
+_stopping: list[threading.Timer] = []
+
+
+def _teardown_watchdog(name: str) -> None:
+    """Exit with status 0 if the process has not ended within :data:`TEARDOWN_GRACE` seconds (started once, from
+    the first call): the node's work is done and its last status sent; the run's log gets every thread's stack and
+    a line saying so, so a hang in the teardown is visible, not hidden."""
+    if _stopping:
+        return
+
+    def expire() -> None:
+        faulthandler.dump_traceback(all_threads=True)
+        print(f"{name}: the middleware's teardown did not end within {TEARDOWN_GRACE:g} s (stacks above): exiting",
+              file=sys.stderr, flush=True)
+        os._exit(0)
+
+    timer = threading.Timer(TEARDOWN_GRACE, expire)
+    timer.daemon = True
+    timer.start()
+    _stopping.append(timer)
 
 
 PARENT_GRACE = 3.0
