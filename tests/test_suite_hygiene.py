@@ -143,7 +143,8 @@ def test_a_graph_tests_processes_measure_the_packages_only_they_run() -> None:
 def test_unmeasured_graph_processes_are_those_of_the_listed_files_but_the_listed_cases(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """tests/conftest.py's choice of graph tests whose processes coverage does not measure: the files of
-    UNMEASURED_CHILDREN, but the tests of MEASURED_CASES, each a test the suite collects; with
+    UNMEASURED_CHILDREN, but the tests of MEASURED_CASES, each a test the suite collects, and no test marked
+    realtime; with
     MOOSE_COVERAGE_CONTEXTS=1 every graph test's processes are measured, in a context named after the test."""
     import base64
     import json
@@ -162,8 +163,9 @@ def test_unmeasured_graph_processes_are_those_of_the_listed_files_but_the_listed
     config.source_pkgs = ["moose", "moose_ros"]
     serialised = config.serialize()
 
-    def item(nodeid: str) -> object:
-        return SimpleNamespace(nodeid=nodeid, path=ROOT / nodeid.split("::")[0])
+    def item(nodeid: str, *marks: str) -> object:
+        return SimpleNamespace(nodeid=nodeid, path=ROOT / nodeid.split("::")[0],
+                               get_closest_marker=lambda name: name if name in marks else None)
 
     case = sorted(MEASURED_CASES)[0]
     unmeasured = case.split("[")[0] + "[another]"
@@ -171,6 +173,7 @@ def test_unmeasured_graph_processes_are_those_of_the_listed_files_but_the_listed
     assert children_config(item(unmeasured), serialised) is None  # type: ignore[arg-type]
     assert children_config(item(case), serialised) is not None  # type: ignore[arg-type]
     assert children_config(item("tests/test_ros_graph.py::test_x"), serialised) is not None  # type: ignore[arg-type]
+    assert children_config(item("tests/test_ros_graph.py::test_x", "realtime"), serialised) is None  # type: ignore[arg-type]
     monkeypatch.setenv(CONTEXTS, "1")
     labelled = children_config(item(unmeasured), serialised)  # type: ignore[arg-type]
     assert labelled is not None and json.loads(base64.b64decode(labelled))["context"] == f"child:{unmeasured}"
