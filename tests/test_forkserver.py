@@ -148,3 +148,23 @@ def test_ps_shows_a_child_as_the_command_it_runs(server: ForkServer) -> None:
     assert argv == [sys.executable.encode(), b"-m", b"forkchild", b"sleep"]
     child.kill()
     child.wait(timeout=10)
+
+
+def test_a_process_keeps_one_server_per_environment_and_replaces_an_ended_one(tmp_path: Path) -> None:
+    """moose_ros.forkserver.shared: the same server for the same environment from run to run; another for another
+    environment (the first one ends); a new one when the old one has died."""
+    from moose_ros import forkserver
+
+    env = {**os.environ, "PYTHONPATH": str(tmp_path)}
+    first = forkserver.shared(env)
+    try:
+        assert forkserver.shared(dict(env)) is first
+        second = forkserver.shared({**env, "MOOSE_TEST_OTHER": "1"})
+        assert second is not first and first.proc.wait(timeout=10) is not None
+        second.proc.kill()
+        second.proc.wait()
+        third = forkserver.shared({**env, "MOOSE_TEST_OTHER": "1"})
+        assert third is not second and third.proc.poll() is None
+    finally:
+        while forkserver._shared:
+            forkserver._shared.pop().close()

@@ -3,9 +3,10 @@
 Every node on our Cyclone runtime spends most of its start-up on the same work: importing NumPy, CasADi,
 cyclonedds and the core, and building the same message classes (rosbags' Jazzy store, each class's XTypes type
 information, :mod:`moose_ros.cdr`'s compiled code) — about 0.7 of the 1 CPU-second a node takes to start, seven
-times per run (docs/testing.md).  ``moose launch`` instead starts one :class:`ForkServer` per run
-(``python -m moose_ros.forkserver NODE…``, by :func:`moose_ros.process.spawn`: it dies with the launcher).  The
-server does that work before any DDS entity or thread exists, then forks one child per node on request.
+times per run (docs/testing.md).  ``moose launch`` instead forks them from a :class:`ForkServer`
+(``python -m moose_ros.forkserver NODE…``, by :func:`moose_ros.process.spawn`: it dies with the launcher), one per
+launching process, kept from run to run (:func:`shared`).  The server does that work before any DDS entity or thread
+exists, then forks one child per node on request.
 
 A child *is* the node's process, as ``python -m moose_ros.nodes NAME ARGS`` would be (``runpy``, the same
 ``sys.argv``): its own process id, its output (stdout and stderr) on the pipe the launcher passed with the request,
@@ -246,7 +247,7 @@ class ForkServer:
                 break
             message = json.loads(data)
             if "exited" in message:
-                child = self.children.get(message["exited"])
+                child = self.children.pop(message["exited"], None)
                 if child is not None:
                     child.end(message["status"])
                 try:
@@ -273,6 +274,22 @@ class ForkServer:
             self.proc.wait()
         self.reader.join(timeout=timeout)
         self.channel.close()
+
+
+_shared: list[ForkServer] = []
+
+
+def shared(env: Mapping[str, str]) -> ForkServer:
+    """This process's fork server for processes of environment ``env``, preloading every node of the graph: kept from
+    run to run (a test process launches dozens of graphs), started anew when ``env`` differs from its own or it has
+    ended (it dies with the thread that started it)."""
+    from .graph import NODES
+
+    if _shared and (not _shared[0].serves(sys.executable, env) or _shared[0].proc.poll() is not None):
+        _shared.pop().close()
+    if not _shared:
+        _shared.append(ForkServer(sorted(NODES), env))
+    return _shared[0]
 
 
 def main(argv: Sequence[str]) -> None:

@@ -51,7 +51,7 @@ from moose.verdict import exit_status
 from .bag import Recorder
 from .bag.params import RunParameters
 from .faults import Fault, FaultInjector
-from .forkserver import ForkServer
+from .forkserver import ForkServer, shared
 from .graph import DIAGNOSTICS, GRAPHS, NODES
 from .incidents import RATE_TOLERANCE
 from .live import LiveView
@@ -284,21 +284,16 @@ class Supervisor:
         self.recorder: Optional[Recorder] = None
         self.live: Optional[LiveView] = None
         self.forks = self.fork_server()
-        try:
-            self.node = create_node(MONITOR, overrides={"use_sim_time": False}, runtime=self.runtimes[MONITOR])
-            """The monitor's node (created last: nothing else here but the fork server holds a resource that
-            needs closing)."""
-        except BaseException:
-            if self.forks is not None:
-                self.forks.close()
-            raise
+        self.node = create_node(MONITOR, overrides={"use_sim_time": False}, runtime=self.runtimes[MONITOR])
+        """The monitor's node (created last: nothing else here holds a resource that needs closing)."""
 
     def fork_server(self) -> Optional[ForkServer]:
-        """The run's :class:`moose_ros.forkserver.ForkServer`, preloading for the nodes on our Cyclone runtime under
-        this interpreter (started now, so that its preload overlaps the domain check); None when there are none."""
+        """The fork server (:func:`moose_ros.forkserver.shared`) for the nodes on our Cyclone runtime under this
+        interpreter (started now if it must be, so that its preload overlaps the domain check); None when there are
+        none."""
         forked = [name for name, (python, env) in self.children.items()
                   if python == sys.executable and env["MOOSE_RUNTIME"] == "dds"]
-        return ForkServer(forked, self.children[forked[0]][1]) if forked else None
+        return shared(self.children[forked[0]][1]) if forked else None
 
     def open(self, bag: Optional[Union[str, Path]], foxglove: Optional[tuple[str, int]]) -> None:
         """The domain check on the monitor's node (:func:`check_domain`), the recorder of ``bag`` and the live view
@@ -320,8 +315,6 @@ class Supervisor:
             if self.recorder is not None:
                 self.recorder.close()
             self.node.shutdown()
-            if self.forks is not None:
-                self.forks.close()
             raise
 
     @contextlib.contextmanager
@@ -471,8 +464,6 @@ class Supervisor:
         self.stop_children()
         if self.live is not None:
             self.live.close()
-        if self.forks is not None:
-            self.forks.close()
         self.node.shutdown()
         if self.recorder is not None:
             self.recorder.close()
