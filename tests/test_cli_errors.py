@@ -171,11 +171,10 @@ def test_simulate_prints_its_verdict_and_exits_with_it(tmp_path: Path) -> None:
 
 def cpu_seconds(pid: int) -> float:
     """User + system CPU time of a running process (/proc/PID/stat), 0 once it has gone."""
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    except OSError:
-        return 0.0
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    from moose_ros.process import stat_fields
+
+    fields = stat_fields(pid)
+    return 0.0 if fields is None else (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def test_ctrl_c_ends_simulate_with_130(tmp_path: Path) -> None:

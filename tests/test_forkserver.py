@@ -14,7 +14,7 @@ from typing import Iterator
 import pytest
 
 from moose_ros.forkserver import ForkServer
-from moose_ros.process import PARENT_ENV, descendants
+from moose_ros.process import PARENT_ENV, descendants, state
 
 CHILD = """
 import os, sys, time
@@ -29,13 +29,6 @@ if action == "sleep":
     time.sleep(float(sys.argv[2]))
 """
 
-
-def _state(pid: int) -> str:
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return "gone"
-    return stat[stat.rindex(")") + 2]
 
 
 @pytest.fixture
@@ -71,9 +64,9 @@ def test_signals_reach_the_child_and_a_kill_is_its_status(server: ForkServer) ->
     assert child.pid in descendants(os.getpid())  # below this process: the server's child
     child.send_signal(signal.SIGSTOP)
     deadline = time.monotonic() + 10
-    while _state(child.pid) != "T" and time.monotonic() < deadline:
+    while state(child.pid) != "T" and time.monotonic() < deadline:
         time.sleep(0.01)
-    assert _state(child.pid) == "T"
+    assert state(child.pid) == "T"
     with pytest.raises(subprocess.TimeoutExpired):
         child.wait(timeout=0.2)
     child.send_signal(signal.SIGCONT)
@@ -86,9 +79,9 @@ def test_a_child_that_ends_at_once_is_reported_and_then_reaped(server: ForkServe
     children = [server.start("forkchild", ["exit", str(code)]) for code in range(8)]
     assert [c.wait(timeout=60) for c in children] == list(range(8))
     deadline = time.monotonic() + 10
-    while any(_state(c.pid) != "gone" for c in children) and time.monotonic() < deadline:
+    while any(state(c.pid) != "gone" for c in children) and time.monotonic() < deadline:
         time.sleep(0.01)
-    assert [_state(c.pid) for c in children] == ["gone"] * 8  # the launcher's reap reached the server
+    assert [state(c.pid) for c in children] == ["gone"] * 8  # the launcher's reap reached the server
 
 
 def test_only_the_servers_interpreter_and_environment_are_forked(server: ForkServer) -> None:
@@ -120,9 +113,9 @@ def test_the_server_and_its_children_die_with_a_sigkilled_launcher(tmp_path: Pat
         launcher.kill()
         launcher.wait()
     deadline = time.monotonic() + 10.0
-    while {_state(server), _state(child)} - {"gone", "Z"} and time.monotonic() < deadline:
+    while {state(server), state(child)} - {"gone", "Z"} and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert {_state(server), _state(child)} <= {"gone", "Z"}  # parent-death signals, launcher → server → child
+    assert {state(server), state(child)} <= {"gone", "Z"}  # parent-death signals, launcher → server → child
 
 
 def test_a_sigkilled_server_takes_its_children_and_their_handles_say_so(server: ForkServer) -> None:
@@ -133,9 +126,9 @@ def test_a_sigkilled_server_takes_its_children_and_their_handles_say_so(server: 
     server.proc.kill()
     assert child.wait(timeout=10) == -signal.SIGKILL
     deadline = time.monotonic() + 10.0
-    while _state(child.pid) not in ("gone", "Z") and time.monotonic() < deadline:
+    while state(child.pid) not in ("gone", "Z") and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert _state(child.pid) in ("gone", "Z")
+    assert state(child.pid) in ("gone", "Z")
     with pytest.raises(OSError, match="fork server"):
         server.start("forkchild", ["exit", "0"])
 

@@ -24,7 +24,7 @@ from moose.params import ParamError
 from moose.scenario import load_scenario
 from moose_ros.faults import Fault
 from moose_ros.launch import launch
-from moose_ros.process import descendants, spawn, stop
+from moose_ros.process import descendants, spawn, state, stop
 
 pytestmark = [pytest.mark.graph, pytest.mark.slow]
 
@@ -80,11 +80,7 @@ def launcher() -> Iterator[list[Launcher]]:
 
 
 def _alive(pid: int) -> bool:
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return False
-    return stat[stat.rindex(")") + 2] != "Z"
+    return state(pid) not in ("gone", "Z")
 
 
 def wait_for_odometry(bag: Path, run: Launcher) -> None:

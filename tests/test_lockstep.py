@@ -159,16 +159,15 @@ def test_in_lockstep_the_fault_signals_wait_until_the_graph_has_taken_what_the_n
     processes (``sleep``), their state read from /proc."""
     import subprocess
     import time
-    from pathlib import Path
 
     from moose_ros.faults import FaultInjector
     from moose_ros.incidents import IncidentLog
+    from moose_ros.process import state as process_state
 
     def now(proc: subprocess.Popen) -> str:
         if proc.poll() is not None:
             return f"exit {proc.returncode}"
-        stat = Path(f"/proc/{proc.pid}/stat").read_text(encoding="ascii")
-        return "stopped" if stat[stat.rindex(")") + 2] in "Tt" else "running"
+        return "stopped" if process_state(proc.pid) in "Tt" else "running"
 
     def state(proc: subprocess.Popen, settle: float = 0.2) -> str:
         """Its state once a signal sent to it has taken effect (/proc shows it within milliseconds)."""

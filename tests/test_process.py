@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from moose_ros.process import PARENT_ENV, descendants, spawn, stop
+from moose_ros.process import PARENT_ENV, descendants, spawn, state, stop
 
 WATCHER = """
 import sys, time
@@ -20,13 +20,6 @@ print("watching", flush=True)
 time.sleep(30)
 """
 
-
-def _state(pid: int) -> str:
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return "gone"
-    return stat[stat.rindex(")") + 2]
 
 
 def test_a_spawned_child_dies_with_its_sigkilled_parent() -> None:
@@ -44,9 +37,9 @@ def test_a_spawned_child_dies_with_its_sigkilled_parent() -> None:
         parent.kill()
         parent.wait()
     deadline = time.monotonic() + 5.0
-    while _state(child) not in ("gone", "Z") and time.monotonic() < deadline:
+    while state(child) not in ("gone", "Z") and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert _state(child) in ("gone", "Z")  # killed by the parent-death signal (a zombie until init reaps it)
+    assert state(child) in ("gone", "Z")  # killed by the parent-death signal (a zombie until init reaps it)
 
 
 @pytest.mark.realtime  # how soon, against the wall clock: the serial phase

@@ -33,10 +33,9 @@ import socket
 import subprocess
 import sys
 import threading
-from pathlib import Path
 from typing import IO, Any, Mapping, Optional, Sequence
 
-from .process import PR_SET_PDEATHSIG, spawn
+from .process import PR_SET_PDEATHSIG, spawn, stat_fields
 
 PACKET = 1 << 16
 """Largest packet (bytes): a node's arguments are a few kilobytes."""
@@ -141,7 +140,8 @@ def _retitle(words: list[str]) -> None:
     arguments name every node), cut to fit and padded with NULs."""
     import ctypes
 
-    fields = Path("/proc/self/stat").read_text().rsplit(")", 1)[1].split()
+    fields = stat_fields("self")
+    assert fields is not None
     start, end = int(fields[45]), int(fields[46])  # arg_start and arg_end, fields 48 and 49 of proc(5)
     title = "\0".join(words).encode()[:end - start - 1]
     ctypes.memmove(start, title + b"\0" * (end - start - len(title)), end - start)

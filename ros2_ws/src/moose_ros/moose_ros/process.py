@@ -31,7 +31,7 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import IO, Any, Callable, Iterable, Mapping, Optional, Protocol, Sequence
+from typing import IO, Any, Callable, Iterable, Mapping, Optional, Protocol, Sequence, Union
 
 PARENT_ENV = "MOOSE_PARENT_PID"
 """Environment variable with the id of the process that spawned a child (:func:`spawn`)."""
@@ -141,18 +141,28 @@ def stop(procs: Iterable[Child], grace: float = 5.0) -> dict[int, int]:
     return codes
 
 
+def stat_fields(pid: Union[int, str]) -> Optional[list[str]]:
+    """The fields of ``/proc/PID/stat`` after the command name (``pid`` may be ``"self"``): ``[0]`` is field 3 of
+    proc(5), the state; None when the process is gone (Linux)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    return stat[stat.rindex(")") + 2:].split()
+
+
+def state(pid: int) -> str:
+    """The state letter of process ``pid`` (``R``, ``S``, ``T``: stopped, ``Z``: a zombie, …), or ``"gone"``."""
+    fields = stat_fields(pid)
+    return "gone" if fields is None else fields[0]
+
+
 def descendants(pid: int) -> list[int]:
     """The living (not zombie) processes below ``pid``, from ``/proc`` (Linux)."""
     children: dict[int, list[int]] = {}
     for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            stat = (entry / "stat").read_text()
-        except OSError:
-            continue
-        fields = stat[stat.rindex(")") + 2:].split()
-        if fields[0] != "Z":
+        fields = stat_fields(entry.name) if entry.name.isdigit() else None
+        if fields is not None and fields[0] != "Z":
             children.setdefault(int(fields[1]), []).append(int(entry.name))
     out: list[int] = []
     todo = [pid]
