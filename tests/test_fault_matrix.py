@@ -67,8 +67,13 @@ def test_fault(graph: str, fault: Fault, can_bus: dict[str, object]) -> None:
     # tests/test_dds_linger.py)
     assert not [n for n, s in summary["node_status"].items() if n != fault.node and s.startswith("died")], summary
     if fault.node == "vehicle_simulator" and fault.action == "kill":  # the world ended: nothing to judge after it
-        assert summary["outcome"] == "incomplete" and summary["exit_status"] == 3
-        assert {"died", "cut_short"} <= kinds
+        # review: a simulator killed at 2.6 s gave a 2.6 s run reported as collision-free, exit status 0; in
+        # lockstep the world ends exactly at the fault's tick
+        assert summary["outcome"] == "incomplete" and summary["exit_status"] == 3, summary["reason"]
+        assert summary["node_exits"]["vehicle_simulator"] == -9
+        assert {("vehicle_simulator", "died"), ("launch", "cut_short")} <= {(i["node"], i["kind"])
+                                                                           for i in summary["incidents"]}
+        assert summary["duration_s"] == pytest.approx(fault.at, abs=1e-9)
         return
     assert summary["outcome"] in ("clear", "stopped_short"), f"{summary['outcome']}: {summary['reason']}\n{log}"
     assert not summary["left_field"] and not summary["collided"] and not summary["lost_control"]

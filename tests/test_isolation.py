@@ -166,7 +166,7 @@ def test_the_real_time_slot_is_one_process_at_a_time() -> None:
 
 
 CONCURRENT = ["tests/test_ros_runtime.py", "tests/test_can_udp.py",
-              "tests/test_launch_supervision.py::test_a_killed_simulator_is_incomplete_and_reported"]
+              "tests/test_fault_matrix.py::test_fault[full-vehicle_simulator-kill]"]
 """Nodes talking over DDS, CAN buses on UDP multicast and loopback ports, a whole graph launched and judged
 (real-time slot): what two runs sharing a domain, a port or the cores would break."""
 
