@@ -88,6 +88,13 @@ def test_fault(graph: str, fault: Fault, can_bus: dict[str, object]) -> None:
         assert summary["final_speed_mps"] < 0.1, summary["final_speed_mps"]
     if fault.action == "kill" and fault.node in ("mpc_planner", "msf_planner"):
         assert "planner_fallback" in kinds and summary["outcome"] == "clear"  # the other planner completes it
+        # the graph went on without it: every tick of the run, and the weight function says what it blends now
+        ticks = round((load_scenario(MATRIX_SCENARIO).lead_time + MATRIX_DURATION) * 100) + 1  # the odometry's 100 Hz
+        assert summary["complete"] and summary["odom_samples"] == ticks, summary["odom_samples"]
+        assert f"node {fault.node} exited with status -9" in summary["log"]
+        assert summary["diagnostics"]["weight_fbl"]["level"] == 1
+        other = "MSF" if fault.node == "mpc_planner" else "MPC"
+        assert f"{fault.node} silent: {other} only" in summary["diagnostics"]["weight_fbl"]["message"], summary
     if fault.action == "stall":
         assert summary["node_exits"][fault.node] == 0  # it resumed and ended normally
     if fault.action == "stall" and fault.node == "vehicle_simulator":  # simulated time stood still with it
