@@ -331,7 +331,7 @@ def test_a_sweep_with_criticality_rows_the_measures_of_each_situation_and_maps_n
     from moose.sweep.store import RunFolder
 
     out = tmp_path / "sweep"
-    args = ["sweep", "--speed", "5", "--obstacle-half-width", "1.5", "--mu", "0.8", "--duration", "3", "--workers", "1",
+    args = ["sweep", "--speed", "5", "--obstacle-half-width", "1.5", "--mu", "0.8", "--duration", "1", "--workers", "1",
             "--quiet"]
     assert main([*args, "--tau", "2,3", "--planner", "combined,aeb", "--criticality", "-o", str(out)]) == 0
     rows = RunFolder(out).rows()
