@@ -68,6 +68,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/bench_plant.py
 	$(BIN)/python bench/bench_graph.py
 	$(BIN)/python bench/bench_cdr.py
+	$(BIN)/python bench/bench_graph_start.py
 	$(BIN)/python bench/bench_memory.py
 	$(BIN)/python bench/bench_sweep.py
 	$(BIN)/python bench/bench_sweep_per_core.py
