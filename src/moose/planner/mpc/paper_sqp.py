@@ -102,6 +102,38 @@ class _EvaluationCap(Exception):
     """The next evaluation would exceed the cap."""
 
 
+# The linear algebra below is elementwise operations and numpy's pairwise sums only, never BLAS or LAPACK: OpenBLAS
+# picks its kernels by the CPU, and they sum in different orders (AVX-512 against AVX2 kernels changed the MPC's
+# extreme runs by up to 0.5 m of clearance: docs/modelling.md, "MPC").  These give the same bits on every CPU.
+
+def _dot(a: np.ndarray, b: np.ndarray) -> float:
+    """aᵀb."""
+    return float(np.add.reduce(a * b))
+
+
+def _matvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """A x."""
+    return np.add.reduce(A * x, axis=1)
+
+
+def _norm(x: np.ndarray) -> float:
+    """‖x‖₂."""
+    return math.sqrt(_dot(x, x))
+
+
+def solve_spd(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """x with A x = b, A symmetric positive definite: Gauss-Jordan elimination without pivoting (stable for such A)
+    on [A | b], each step one outer product."""
+    n = len(b)
+    M = np.empty((n, n + 1))
+    M[:, :n], M[:, n] = A, b
+    for k in range(n):
+        row = M[k] / M[k, k]
+        M -= np.multiply.outer(M[:, k], row)
+        M[k] = row
+    return M[:, n].copy()
+
+
 def box_qp(H: np.ndarray, g: np.ndarray, lower: np.ndarray, upper: np.ndarray,
            max_iter: int | None = None) -> np.ndarray:
     """argmin ½ dᵀH d + gᵀd subject to lower ≤ d ≤ upper, H symmetric positive definite, lower ≤ 0 ≤ upper.
@@ -123,7 +155,7 @@ def box_qp(H: np.ndarray, g: np.ndarray, lower: np.ndarray, upper: np.ndarray,
         target = d.copy()
         if free.any():
             rows = H[free]
-            target[free] = np.linalg.solve(rows[:, free], -(g[free] + rows[:, working] @ d[working]))
+            target[free] = solve_spd(rows[:, free], -(g[free] + _matvec(rows[:, working], d[working])))
         step = target - d
         ratio, blocking = 1.0, -1
         for i in np.flatnonzero(free & (step != 0.0)):
@@ -132,7 +164,7 @@ def box_qp(H: np.ndarray, g: np.ndarray, lower: np.ndarray, upper: np.ndarray,
                 ratio, blocking = limit, int(i)
         if blocking < 0:  # the minimiser on the working set: release a bound whose multiplier is negative
             d = target
-            gradient = H @ d + g
+            gradient = _matvec(H, d) + g
             multipliers = np.where(at_lower, gradient, -gradient)  # ≥ 0 at the QP's minimiser
             multipliers[free] = np.inf
             release = int(np.argmin(multipliers))
@@ -159,7 +191,7 @@ def _bfgs_update(H: np.ndarray, s: np.ndarray, q: np.ndarray) -> np.ndarray:
     documentation describes for fmincon's SQP so that H stays positive definite; H unchanged if
     no modification makes qᵀs positive (s = 0)."""
     q = q.copy()
-    qs = float(q @ s)
+    qs = _dot(q, s)
     if qs <= 0.0:
         tolerance = -1e-5 * abs(qs)  # "a small negative tolerance"
         for _ in range(64 * len(q)):
@@ -170,19 +202,19 @@ def _bfgs_update(H: np.ndarray, s: np.ndarray, q: np.ndarray) -> np.ndarray:
             if products[i] >= 0.0:
                 break
             q[i] *= 0.5
-            qs = float(q @ s)
+            qs = _dot(q, s)
         if qs <= 0.0:
             wrong = q * s < 0.0
             v = np.where(wrong, s, 0.0)
-            vs = float(v @ s)
+            vs = _dot(v, s)
             if vs <= 0.0:
                 return H
-            q += (2.0 * (1e-8 * float(s @ s) - qs) / vs) * v  # w systematically large enough: qᵀs > 0
-            qs = float(q @ s)
+            q += (2.0 * (1e-8 * _dot(s, s) - qs) / vs) * v  # w systematically large enough: qᵀs > 0
+            qs = _dot(q, s)
             if qs <= 0.0:
                 return H
-    Hs = H @ s
-    return H + np.outer(q, q) / qs - np.outer(Hs, Hs) / float(s @ Hs)
+    Hs = _matvec(H, s)
+    return H + np.outer(q, q) / qs - np.outer(Hs, Hs) / _dot(s, Hs)
 
 
 def fmincon_sqp(f: Callable[[np.ndarray], float], x0: np.ndarray, lb: np.ndarray | float,
@@ -238,9 +270,9 @@ def fmincon_sqp(f: Callable[[np.ndarray], float], x0: np.ndarray, lb: np.ndarray
         if iterations >= options.max_iter:
             return result("max_iter", optimality)
         d = box_qp(H, g, lb - x, ub - x)
-        slope = float(g @ d)
-        step_limit = options.step_tol * (1.0 + float(np.linalg.norm(x)))
-        length = float(np.linalg.norm(d))  # the QP's solution is a descent direction: g·d < 0
+        slope = _dot(g, d)
+        step_limit = options.step_tol * (1.0 + _norm(x))
+        length = _norm(d)  # the QP's solution is a descent direction: g·d < 0
         alpha = 1.0
         try:
             while True:
@@ -256,7 +288,7 @@ def fmincon_sqp(f: Callable[[np.ndarray], float], x0: np.ndarray, lb: np.ndarray
         s = trial - x
         x, fx = trial, f_trial
         iterations += 1
-        if float(np.linalg.norm(s)) < step_limit:
+        if _norm(s) < step_limit:
             return result("small_step", optimality)
         try:
             g_new = gradient(x, fx)
