@@ -2,6 +2,7 @@
 the node API each backend implements (publishers, subscriptions, timers, the clock, messages, the executor)."""
 from __future__ import annotations
 
+import abc
 import contextlib
 import dataclasses
 import math
@@ -158,7 +159,7 @@ class _Watch:
                     return
 
 
-class NodeBase:
+class NodeBase(abc.ABC):
     """Parameters, logging and the spin/shutdown life cycle shared by both backends."""
 
     def __init__(self, name: str, params_file: Optional[str], overrides: dict[str, Any],
@@ -202,9 +203,10 @@ class NodeBase:
         self._closed = True
         self._release()
 
-    def _wake(self) -> None:
+    def _wake(self) -> None:  # noqa: B027 (a hook, not abstract: a backend that waits with a timeout needs none)
         """Interrupt a blocking wait of the executor (backends that wait without a timeout)."""
 
+    @abc.abstractmethod
     def _release(self) -> None:
         raise NotImplementedError
 
@@ -252,15 +254,18 @@ class NodeBase:
         return self._params
 
     # -- messaging and the executor: what each backend implements -------------------
+    @abc.abstractmethod
     def publisher(self, type_name: str, topic: str, qos: Qos = QOS_DEFAULT) -> Publisher:
         """A publisher of ``type_name`` (``pkg/msg/Name``) on ``topic`` (resolved against the node's namespace)."""
         raise NotImplementedError
 
+    @abc.abstractmethod
     def subscription(self, type_name: str, topic: str, callback: Callable[[Any], None],
                      qos: Qos = QOS_DEFAULT) -> Handle:
         """``callback`` for each message of ``type_name`` on ``topic``, called from :meth:`spin`/:meth:`spin_once`."""
         raise NotImplementedError
 
+    @abc.abstractmethod
     def timer(self, period: float, callback: Callable[[], None]) -> Handle:
         """``callback`` every ``period`` seconds of the node's clock (simulated time with ``use_sim_time``)."""
         raise NotImplementedError
@@ -279,46 +284,57 @@ class NodeBase:
         thread.start()
         return Handle(watch.cancel)
 
+    @abc.abstractmethod
     def _arm(self, watch: "_Watch") -> None:
         """Backend: prepare to run ``watch``'s callback in the executor when :meth:`_fire_watch` is called."""
         raise NotImplementedError
 
+    @abc.abstractmethod
     def _fire_watch(self, watch: "_Watch") -> None:
         """Backend, from the watch's thread: run ``watch.done()`` in the executor's thread, soon."""
         raise NotImplementedError
 
+    @abc.abstractmethod
     def now(self) -> float:
         """ROS time (s): simulated time with ``use_sim_time``, else the wall clock."""
         raise NotImplementedError
 
+    @abc.abstractmethod
     def make(self, type_name: str, **fields: Any) -> Any:
         """A message of ``type_name`` of this backend with ``fields`` set (an unknown field is a ``TypeError``)."""
         raise NotImplementedError
 
     @staticmethod
+    @abc.abstractmethod
     def serialize(msg: Any) -> bytes:
         """The message's CDR with its encapsulation header, as rosbag2 stores it."""
         raise NotImplementedError
 
+    @abc.abstractmethod
     def spin_once(self, timeout: float) -> None:
         """Run callbacks and timers for ``timeout`` seconds (returns early on :meth:`shutdown`)."""
         raise NotImplementedError
 
+    @abc.abstractmethod
     def spin(self, until: Optional[Callable[[], bool]] = None) -> None:
         """Run callbacks and timers until :meth:`shutdown` or ``until()`` is true."""
         raise NotImplementedError
 
     # -- introspection ---------------------------------------------------------------
+    @abc.abstractmethod
     def node_names(self) -> list[tuple[str, str]]:
         """(namespace, name) of the other nodes in the graph (``ros2 node list``)."""
         raise NotImplementedError
 
+    @abc.abstractmethod
     def count_publishers(self, topic: str) -> int:
         raise NotImplementedError
 
+    @abc.abstractmethod
     def count_subscribers(self, topic: str) -> int:
         raise NotImplementedError
 
+    @abc.abstractmethod
     def describe_discovery(self) -> str:
         """How far this node's DDS discovery reaches and how that is held (one line for the log)."""
         raise NotImplementedError
