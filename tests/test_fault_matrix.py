@@ -34,6 +34,7 @@ from moose_ros.fault_matrix import (
     WEAKEST_END,
     matrix_cases,
     reported,
+    row,
     run_case,
     weakest_parameters,
     write_matrix,
@@ -44,6 +45,26 @@ ROOT = Path(__file__).resolve().parents[1]
 CASES = [(graph, fault) for graph in MATRIX_GRAPHS for fault in matrix_cases(graph)]
 STOPS = {"observer", "obstacle_detector", "weight_fbl", "motion_controller"}
 """Killing one of these leaves nothing that can drive: the minimum-risk maneuver stops the car."""
+
+
+def documented(weakest: bool = False) -> dict[tuple[str, str, str], list[str]]:
+    """The cells of each row of the matrix docs/graph.md carries (``weakest``: of the weakest minimum_risk's)."""
+    begin, end = (WEAKEST_BEGIN, WEAKEST_END) if weakest else (MATRIX_BEGIN, MATRIX_END)
+    table = (ROOT / "docs" / "graph.md").read_text(encoding="utf-8").split(begin, 1)[1].split(end, 1)[0]
+    rows = [[cell.strip() for cell in line.strip("|").split(" | ")] for line in table.splitlines()
+            if re.match(r"\| (full|can) \|", line)]
+    return {(cells[0], cells[1], cells[2]): cells for cells in rows}
+
+
+def assert_documented(graph: str, fault: Fault, summary: dict[str, object], weakest: bool = False) -> None:
+    """The run is its row of the documented matrix (``python -m moose_ros.fault_matrix --write docs/graph.md``):
+    in lockstep every number is the same on any machine; of the incidents, a node killed after the run for not
+    ending within the launcher's grace (``stop_timeout``) is the machine's speed, not the run's."""
+    cells = [c.strip() for c in row(graph, fault, summary).strip("|").split(" | ")]
+    doc = documented(weakest)[(graph, fault.node, fault.action)]
+    assert cells[:-1] == doc[:-1], f"docs/graph.md is stale or the run differs:\n{cells}\n{doc}"
+    incidents = [set(c.split(", ")) - {"stop_timeout"} for c in (cells[-1], doc[-1])]
+    assert incidents[0] == incidents[1], incidents
 
 
 @pytest.fixture(scope="module")
@@ -66,6 +87,7 @@ def test_fault(graph: str, fault: Fault, can_bus: dict[str, object]) -> None:
     # no other node died during the run (how fast each one ends after SIGTERM is the machine's speed:
     # tests/test_dds_linger.py)
     assert not [n for n, s in summary["node_status"].items() if n != fault.node and s.startswith("died")], summary
+    assert_documented(graph, fault, summary)
     if fault.node == "vehicle_simulator" and fault.action == "kill":  # the world ended: nothing to judge after it
         # review: a simulator killed at 2.6 s gave a 2.6 s run reported as collision-free, exit status 0; in
         # lockstep the world ends exactly at the fault's tick
@@ -121,6 +143,7 @@ def test_the_weakest_accepted_maneuver_still_stops_the_car(graph: str, fault: Fa
     assert not summary["left_field"] and not summary["collided"] and not summary["lost_control"]
     assert "minimum_risk" in {i["kind"] for i in summary["incidents"]}
     assert summary["final_speed_mps"] < 0.1, summary["final_speed_mps"]
+    assert_documented(graph, fault, summary, weakest=True)
 
 
 def test_docs_carry_the_generated_matrix() -> None:
