@@ -253,3 +253,50 @@ def test_the_command_refuses_bad_paths_before_running(tmp_path: Path, capsys: py
     with pytest.raises(SystemExit) as exited:  # argparse's own error: "moose reproduce: error: argument --seed: …"
         main(["reproduce", "--seed", "-1"])
     assert exited.value.code == 2 and "--seed: '-1' must be a non-negative integer" in capsys.readouterr().err
+
+
+def test_the_command_writes_its_blocks_and_every_run(tmp_path: Path, paper_runs: RunCache, runs: list[Run],
+                                                     found: list[Claim], monkeypatch: pytest.MonkeyPatch,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """``moose reproduce --write README.md --write docs/results.md --json F`` on copies whose generated blocks are
+    stale: each block is replaced by what the command generates, the rest of each page is left as it was, and the
+    JSON holds every run made.  The runs are the session's (the command asks for the default configuration and seed
+    0, as ``paper_runs`` was made with)."""
+    import json
+
+    import moose.reproduce
+    from moose.cli import main
+
+    asked: list[tuple[object, int]] = []
+
+    def session_runs(config: object, seed: int = 0, progress: object = None) -> RunCache:
+        asked.append((config, seed))
+        return paper_runs
+
+    monkeypatch.setattr(moose.reproduce, "RunCache", session_runs)
+    pages = {README: tmp_path / "README.md", RESULTS: tmp_path / "results.md"}
+    for page, copy in pages.items():
+        copy.write_text(re.sub(r"(<!-- BEGIN (\w+) -->\n).*?(<!-- END \2 -->)", r"\1stale\n\3",
+                               page.read_text(encoding="utf-8"), flags=re.S), encoding="utf-8")
+    out = tmp_path / "runs.json"
+    assert main(["reproduce", "--write", str(pages[README]), "--write", str(pages[RESULTS]), "--json", str(out)]) == 0
+    assert asked == [(paper_runs.config, 0)]
+    printed = capsys.readouterr().out
+    assert printed.startswith(render_claims(found))
+    assert f"wrote summary of {pages[README]}" in printed
+    assert f"wrote conditions, results, claims of {pages[RESULTS]}" in printed
+    assert block("summary", pages[README]).strip() == render_summary(runs, found)
+    assert block("claims", pages[RESULTS]).strip() == render_claims(found)
+    assert block("results", pages[RESULTS]).strip() == render_results(runs)
+    assert block("conditions", pages[RESULTS]).strip() == render_conditions(paper_runs.asked)
+    for page, copy in pages.items():  # outside its blocks, each page is as it was
+        outside = [re.sub(r"<!-- BEGIN (\w+) -->\n.*?<!-- END \1 -->", "", p.read_text(encoding="utf-8"), flags=re.S)
+                   for p in (page, copy)]
+        assert outside[0] == outside[1], page.name
+    rows = json.loads(out.read_text(encoding="utf-8"))
+    assert len(rows) == len(paper_runs.asked)
+    by_run = {(r["scenario"], r["planner"], r["solver"], r["road_mu"], json.dumps(r["settings"], sort_keys=True)): r
+              for r in rows}
+    for run in runs:  # each result run's row: its summary
+        row = by_run[(run.scenario, run.planner, run.solver, run.mu, json.dumps(dict(run.settings), sort_keys=True))]
+        assert row["outcome"] == run.summary["outcome"] and row["min_clearance_m"] == run.summary["min_clearance_m"]
