@@ -77,15 +77,20 @@ def test_frames_markers_and_qos_are_there(bag: Path) -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("bag", BAGS, ids=lambda p: p.name)
-def test_replan_uses_the_runs_parameters(bag: Path) -> None:
+def test_replan_uses_the_runs_parameters(bag: Path, tmp_path: Path) -> None:
+    from matplotlib.image import imread
+
     from moose.config import load_config
-    from moose_ros.bag import replan
+    from moose_ros.bag import plot_replan, replan
     from moose_ros.bag.params import read_run_parameters
 
     run = read_run_parameters(bag)
     assert run is not None and bag.name.startswith(f"{run.scenario.name}_{run.planner}")
     assert run.config.vehicle.mu == run.scenario.mu  # the road of the run, not the file's default
-    summary = replan(bag)["summary"]
+    replanned = replan(bag)
+    summary = replanned["summary"]
+    # the plot: three panels of 7 x 7 inches at 110 dpi, in a folder it makes
+    assert imread(plot_replan(replanned["rows"], tmp_path / "plots" / "replan.png")).shape == (770, 770, 4)
     assert summary["parameters"] == "bag"
     if "graph" not in bag.name:  # a lockstep run is reproduced to round-off
         assert summary["rms_ay"] < 1e-9 and summary["rms_weight"] < 1e-9 and summary["mpc_status_agreement"] == 1.0
@@ -93,6 +98,46 @@ def test_replan_uses_the_runs_parameters(bag: Path) -> None:
         assert summary["rms_ay"] < 0.5
     default = replan(bag, load_config())["summary"]  # the default configuration's road is another one
     assert default["parameters"] == "given" and default["road_mu"] != run.config.vehicle.mu
+
+
+def test_an_unfinished_bag_still_gives_its_run_parameters(tmp_path: Path) -> None:
+    """A bag cut off (its recorder killed: no metadata.yaml, the file ending mid-record) still names its run: the
+    recorder writes the ``moose`` metadata record right after the header, and the reader reads records up to the
+    cut.  A file cut before that record has none (``None``: recorded without them)."""
+    from moose_ros.bag.params import read_run_parameters
+
+    bag = ROOT / "bags" / "paper_v5_tau3_combined"
+    whole = read_run_parameters(bag)
+    assert whole is not None and whole.scenario.name == "paper_v5_tau3" and whole.planner == "combined"
+    data = next(bag.glob("*.mcap")).read_bytes()
+    for kept in (len(data), len(data) // 2, len(data) // 100):
+        cut = tmp_path / f"cut_{kept}"
+        cut.mkdir()
+        (cut / "run_0.mcap").write_bytes(data[:kept])
+        assert read_run_parameters(cut) == whole, kept
+        assert read_run_parameters(cut / "run_0.mcap") == whole, kept  # the file itself
+    (cut / "run_0.mcap").write_bytes(data[:100])
+    assert read_run_parameters(cut) is None
+
+
+def test_damaged_run_parameters_are_named(tmp_path: Path) -> None:
+    from moose_ros.bag.errors import BagError
+    from moose_ros.bag.params import RunParameters, read_run_parameters
+
+    whole = read_run_parameters(ROOT / "bags" / "paper_v5_tau3_combined")
+    assert whole is not None
+    strings = whole.as_strings()
+    assert RunParameters.from_strings(strings, "bag x") == whole
+    with pytest.raises(BagError, match=r"^bag x: run parameters lack 'moose.seed'$"):
+        RunParameters.from_strings({k: v for k, v in strings.items() if k != "moose.seed"}, "bag x")
+    with pytest.raises(BagError, match=r"^bag x: run parameters are unreadable: moose.planner = 'fast' is invalid"):
+        RunParameters.from_strings({**strings, "moose.planner": "fast"}, "bag x")
+    unreadable = r"^bag x: run parameters are unreadable: invalid literal for int\(\) with base 10: 'zero'$"
+    with pytest.raises(BagError, match=unreadable):
+        RunParameters.from_strings({**strings, "moose.seed": "zero"}, "bag x")
+    (tmp_path / "metadata.yaml").write_text("rosbag2_bagfile_information: [1, 2\n", encoding="utf-8")
+    with pytest.raises(BagError, match=r"metadata.yaml is unreadable"):
+        read_run_parameters(tmp_path)
 
 
 def test_birdseye_view_draws_a_shipped_bag_and_refuses_one_without_markers(tmp_path: Path) -> None:
