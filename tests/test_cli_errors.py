@@ -485,3 +485,33 @@ def test_figures_and_maps_on_a_full_or_read_only_disk_are_errors(
     assert done.returncode == EXIT_BAD_INPUT and "Traceback" not in done.stderr
     assert f"moose: error: sweep results {str(results)!r} are unreadable" in done.stderr
     assert "--resume" in done.stderr  # and how to rebuild them
+
+
+def test_a_ctrl_c_that_a_c_extension_turned_into_a_system_error_ends_with_130(monkeypatch: pytest.MonkeyPatch) -> None:
+    """CasADi lets a KeyboardInterrupt out of a callback as a SystemError ("returned a result with an exception
+    set") whose cause is the interrupt: 130, as any Ctrl-C.  A SystemError of another cause is a bug, not hidden."""
+    import moose.cli.reproduce
+    from moose.cli import _interrupted, main
+
+    def casadi_interrupted(args: object) -> int:
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            raise SystemError("<built-in function ...> returned a result with an exception set") from exc
+
+    def broken(args: object) -> int:
+        raise SystemError("a real one")
+
+    monkeypatch.setattr(moose.cli.reproduce, "cmd_reproduce", casadi_interrupted)
+    assert main(["reproduce"]) == 130
+    monkeypatch.setattr(moose.cli.reproduce, "cmd_reproduce", broken)
+    with pytest.raises(SystemError, match="a real one"):
+        main(["reproduce"])
+    looped = SystemError("a chain that refers to itself")
+    looped.__context__ = ValueError()
+    looped.__context__.__context__ = looped
+    assert not _interrupted(looped)
+    deep = SystemError()
+    deep.__context__ = ValueError()
+    deep.__context__.__cause__ = KeyboardInterrupt()
+    assert _interrupted(deep)
