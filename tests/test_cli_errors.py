@@ -16,6 +16,7 @@ import socket
 import struct
 import subprocess
 import sys
+import textwrap
 import threading
 import time
 from pathlib import Path
@@ -502,7 +503,15 @@ def test_a_ctrl_c_that_a_c_extension_turned_into_a_system_error_ends_with_130(mo
     def broken(args: object) -> int:
         raise SystemError("a real one")
 
+    def class_body_interrupted(args: object) -> int:  # a Ctrl-C while matplotlib's classes are made (seen)
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            raise RuntimeError("Error calling __set_name__ on '_axis_method_wrapper' instance") from exc
+
     monkeypatch.setattr(moose.cli.reproduce, "cmd_reproduce", casadi_interrupted)
+    assert main(["reproduce"]) == 130
+    monkeypatch.setattr(moose.cli.reproduce, "cmd_reproduce", class_body_interrupted)
     assert main(["reproduce"]) == 130
     monkeypatch.setattr(moose.cli.reproduce, "cmd_reproduce", broken)
     with pytest.raises(SystemError, match="a real one"):
@@ -515,3 +524,32 @@ def test_a_ctrl_c_that_a_c_extension_turned_into_a_system_error_ends_with_130(mo
     deep.__context__ = ValueError()
     deep.__context__.__cause__ = KeyboardInterrupt()
     assert _interrupted(deep)
+
+
+INTERRUPTED_PROGRAM = textwrap.dedent("""
+    import atexit, sys
+    import moose.cli.reproduce
+    from moose.cli import main
+
+    def interrupted(args):
+        raise KeyboardInterrupt
+
+    class Finalized:  # a module global's finaliser runs in the interpreter's teardown
+        def __del__(self):
+            print("the interpreter was torn down", flush=True)
+
+    kept = Finalized()
+    moose.cli.reproduce.cmd_reproduce = interrupted
+    atexit.register(lambda: print("the exit handlers ran", flush=True))
+    sys.argv = ["moose", "reproduce"]
+    print("partial output", end="")  # still in the buffer when the process ends
+    sys.exit(main())
+""")
+
+
+def test_an_interrupted_program_runs_its_exit_handlers_and_ends_with_130() -> None:
+    """Run as the program, an interrupted command ends its process without Python's finalization (where a C
+    extension interrupted mid-call aborted it, exit -6), after the exit handlers and with its output flushed."""
+    run = subprocess.run([sys.executable, "-c", INTERRUPTED_PROGRAM], capture_output=True, text=True, timeout=60)
+    assert run.returncode == 130, run.stderr
+    assert run.stdout == "partial outputthe exit handlers ran\n" and "Traceback" not in run.stderr

@@ -16,7 +16,7 @@ import argparse
 import os
 import signal
 import sys
-from typing import Callable, Sequence
+from typing import Callable, NoReturn, Sequence
 
 from ..files import OutputError
 from ..params import ParamError
@@ -57,6 +57,32 @@ def _interrupted(exc: BaseException) -> bool:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command of ``argv`` (default: the command line); its exit status.  Run as the program (``argv``
+    None), an interrupted command ends its process at once (:func:`_end_interrupted`)."""
+    status = _command(argv)
+    if status == EXIT_INTERRUPTED and argv is None:
+        _end_interrupted(status)
+    return status
+
+
+def _end_interrupted(status: int) -> NoReturn:
+    """End the process of an interrupted command without Python's finalization.  The command's own cleanup has run
+    (its ``finally`` blocks: bags closed, workers and nodes stopped) and the exit handlers run here (``atexit``:
+    multiprocessing's, coverage.py's); what is skipped is the interpreter's teardown, where a C extension that a
+    Ctrl-C interrupted mid-call aborted the process ("Fatal Python error: PyThreadState_Get: … the GIL is
+    released", exit status -6 where 130 was due: 1 Ctrl-C of 60 in ``moose simulate`` under coverage, 2026-12-03)."""
+    import atexit
+
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed pipe or stream: nothing more can be said
+            pass
+    os._exit(status)
+
+
+def _command(argv: Sequence[str] | None) -> int:
     INTERRUPTS.install()
     try:
         parser = build_parser()
@@ -74,12 +100,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_OUTPUT
     except KeyboardInterrupt:
         return EXIT_INTERRUPTED
-    except SystemError as exc:  # Ctrl-C inside a C extension (CasADi) surfaces as "returned a result with an
-        if _interrupted(exc):   # exception set", the KeyboardInterrupt as its cause
-            return EXIT_INTERRUPTED
-        raise
     except BrokenPipeError:  # the reader of our output went away (`moose bag info … | head`): not an error of ours
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 128 + signal.SIGPIPE
+    except Exception as exc:  # a Ctrl-C that surfaced as another error, the KeyboardInterrupt as its cause: inside
+        if _interrupted(exc):  # a C extension (CasADi) a SystemError, "returned a result with an exception set";
+            return EXIT_INTERRUPTED  # in a class body being made (importing matplotlib), a RuntimeError
+        raise
     finally:
         INTERRUPTS.uninstall()
