@@ -5,7 +5,8 @@
     python bench/planted_bugs.py --list       # the bugs, their patches and tests
 
 The nine bugs of the audit in issue 14 (five it caught, four it missed) are the table below, and one for each
-assertion issue 25 found too weak to fail on a wrong result (the bug passed the old assertion).  Each is a
+assertion issue 25 found too weak to fail on a wrong result (the bug passed the old assertion), and one
+for each bug found since.  Each is a
 text replacement in one source file; the script copies the working tree to a temporary folder, runs the
 bug's tests there unpatched first (they must pass: a failing baseline would count every bug as caught),
 then applies the patch, runs them again, and reports ``caught`` (the tests fail) or ``MISSED``.  A patch
@@ -87,6 +88,18 @@ BUGS = (
         "src/moose/planner/fbl.py",
         (("self._axles = Axles.of(vehicle, vehicle.mu)", "self._axles = Axles.of(vehicle, 0.9)"),),
         ("tests/test_weight.py",)),
+    # a run must be the same bits on every CPU: OpenBLAS's kernels, chosen by the CPU, sum in different orders (caught
+    # where this CPU's kernels are not the SSE ones the test compares with: any x86-64 with AVX)
+    Bug("sqp-blas-solve", "the paper's SQP solves its QP's systems with LAPACK (np.linalg.solve)",
+        "src/moose/planner/mpc/paper_sqp.py",
+        (("target[free] = solve_spd(rows[:, free], -(g[free] + _matvec(rows[:, working], d[working])))",
+          "target[free] = np.linalg.solve(rows[:, free], -(g[free] + rows[:, working] @ d[working]))"),),
+        ("tests/test_paper_sqp.py",)),
+    # a Ctrl-C that surfaced as another error than CasADi's SystemError (a class being made: RuntimeError) is 130
+    Bug("interrupt-only-as-system-error", "a Ctrl-C is recognised inside a SystemError only",
+        "src/moose/cli/__init__.py",
+        (("        if _interrupted(exc):", "        if isinstance(exc, SystemError) and _interrupted(exc):"),),
+        ("tests/test_cli_errors.py",)),
     # the compiled CDR of the DDS messages: every message of the graph goes through it
     Bug("cdr-xcdr2-alignment", "the compiled CDR aligns 8-byte fields to 4 (XCDR2's rule, not XCDR1's)",
         "ros2_ws/src/moose_ros/moose_ros/cdr.py",
