@@ -79,12 +79,17 @@ def max_iterations(n: int, max_evals: int = 100) -> int:
 
 # --- the QP subproblem -------------------------------------------------------------------------
 
+def random_spd(rng: np.random.Generator, n: int) -> np.ndarray:
+    """A random symmetric positive definite n × n matrix, its smallest eigenvalue at least 10⁻³."""
+    a = rng.normal(size=(n, n))
+    return a @ a.T + 10.0 ** rng.uniform(-3, 1) * np.eye(n)
+
+
 @settings(max_examples=60, deadline=None)
 @given(st.integers(1, 24), st.integers(0, 2**31 - 1))
 def test_box_qp_meets_the_kkt_conditions(n: int, seed: int) -> None:
     rng = np.random.default_rng(seed)
-    a = rng.normal(size=(n, n))
-    H = a @ a.T + 10.0 ** rng.uniform(-3, 1) * np.eye(n)
+    H = random_spd(rng, n)
     g = rng.normal(scale=10.0 ** rng.uniform(-2, 2), size=n)
     x = rng.uniform(-1.0, 1.0, size=n)
     x[rng.random(n) < 0.3] = 1.0
@@ -104,8 +109,7 @@ def test_box_qp_meets_the_kkt_conditions(n: int, seed: int) -> None:
 @given(st.integers(1, 24), st.integers(0, 2**31 - 1))
 def test_solve_spd_solves_symmetric_positive_definite_systems(n: int, seed: int) -> None:
     rng = np.random.default_rng(seed)
-    a = rng.normal(size=(n, n))
-    A = a @ a.T + 10.0 ** rng.uniform(-3, 1) * np.eye(n)
+    A = random_spd(rng, n)
     x = rng.normal(size=n)
     b = A @ x
     given_A, given_b = A.copy(), b.copy()
