@@ -13,6 +13,7 @@ docs/graph.md carries the matrix this code generates (``python -m moose_ros.faul
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 import re
 from pathlib import Path
@@ -47,6 +48,7 @@ STOPS = {"observer", "obstacle_detector", "weight_fbl", "motion_controller"}
 """Killing one of these leaves nothing that can drive: the minimum-risk maneuver stops the car."""
 
 
+@functools.cache
 def documented(weakest: bool = False) -> dict[tuple[str, str, str], list[str]]:
     """The cells of each row of the matrix docs/graph.md carries (``weakest``: of the weakest minimum_risk's)."""
     begin, end = (WEAKEST_BEGIN, WEAKEST_END) if weakest else (MATRIX_BEGIN, MATRIX_END)
