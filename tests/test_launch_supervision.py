@@ -273,19 +273,25 @@ def test_a_node_that_hangs_on_sigterm_shows_where_before_it_is_killed(tmp_path: 
 
 
 TEARDOWN_HANGS = '''
-import time
+import ctypes, time
 import moose_ros.nodes
 from moose_ros.runtime.dds import DdsNode
 moose_ros.nodes.TEARDOWN_GRACE = 1.0
-DdsNode._release = lambda self: time.sleep(3600)  # the middleware's teardown never returns
+DdsNode._release = lambda self: {hang}  # the middleware's teardown never returns
 '''
+HANGS = {"lock released": "time.sleep(3600)",
+         "lock held": "ctypes.PyDLL(None).sleep(3600)"}
+"""How the teardown hangs: waiting with the interpreter's lock released (other Python threads run), or holding it
+(rclpy's ``destroy_node`` calls into the middleware without releasing it: no Python thread runs)."""
 
 
-def test_a_node_whose_middleware_teardown_hangs_exits_and_says_where(tmp_path: Path) -> None:
+@pytest.mark.parametrize("how", HANGS)
+def test_a_node_whose_middleware_teardown_hangs_exits_and_says_where(tmp_path: Path, how: str) -> None:
     """The node's work is done once it stops; a teardown that never returns (rclpy's destroy_node in Fast DDS,
     once in ~20 launches) ends the process with status 0 after moose_ros.nodes.TEARDOWN_GRACE, with every thread's
-    stack and a line saying so in its output, instead of running into the launcher's SIGKILL."""
-    (tmp_path / "sitecustomize.py").write_text(TEARDOWN_HANGS)
+    stack in its output (and a line saying so, when the interpreter's lock is free to write it), instead of running
+    into the launcher's SIGKILL."""
+    (tmp_path / "sitecustomize.py").write_text(TEARDOWN_HANGS.format(hang=HANGS[how]))
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")]),
            "MOOSE_RUNTIME": "dds"}
     node = spawn([sys.executable, "-m", "moose_ros.nodes", "observer", "--param", "scenario=paper_v5_tau3"], env=env,
@@ -305,5 +311,6 @@ def test_a_node_whose_middleware_teardown_hangs_exits_and_says_where(tmp_path: P
             node.kill()
             node.wait()
     assert node.returncode == 0, out[-3000:]
-    assert "observer: the middleware's teardown did not end within 1 s (stacks above): exiting" in out, out[-3000:]
-    assert "sitecustomize.py" in out  # where it hung: the stack of the main thread, in the never-ending teardown
+    explained = "observer: the middleware's teardown did not end within 1 s (stacks follow): exiting" in out
+    assert explained == (how == "lock released"), out[-3000:]
+    assert "most recent call first" in out and "sitecustomize.py" in out  # where it hung: the main thread's stack

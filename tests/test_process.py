@@ -70,3 +70,24 @@ def test_stop_ends_a_stopped_child_with_sigterm() -> None:
     started = time.monotonic()
     assert stop([child], grace=5.0) == {child.pid: 0}  # SIGCONT first: a stopped child acts on SIGTERM
     assert time.monotonic() - started < 3.0
+
+
+EXIT_LATER = """\
+import ctypes, sys
+from moose_ros.process import exit_later
+print(exit_later(0.2, int(sys.argv[1])), flush=True)
+ctypes.PyDLL(None).sleep(120)  # holds the interpreter's lock: no Python thread runs again
+print("not reached", flush=True)
+"""
+
+
+@pytest.mark.parametrize("status", [0, 3])
+def test_exit_later_ends_a_process_whose_interpreter_lock_is_held(status: int) -> None:
+    """A C call that never returns and holds the interpreter's lock (as rclpy's destroy_node does) blocks every
+    Python thread; exit_later's POSIX timer still ends the process, with the status asked for."""
+    child = spawn([sys.executable, "-c", EXIT_LATER, str(status)], stdout=subprocess.PIPE, text=True)
+    try:
+        out, _ = child.communicate(timeout=60)
+    finally:
+        stop([child], grace=1.0)
+    assert (child.returncode, out) == (status, "posix\n")

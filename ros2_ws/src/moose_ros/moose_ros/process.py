@@ -20,10 +20,12 @@ process is SIGKILLed:
 
 :func:`stop` ends a set of children as the launcher does at the end of a run: SIGCONT (a stopped child
 cannot act on SIGTERM), SIGTERM, then SIGKILL after a grace period.  :func:`descendants` lists the living
-processes below a process (``/proc``), for tests that check that nothing survived.
+processes below a process (``/proc``), for tests that check that nothing survived.  :func:`exit_later` ends the
+process after a delay even while a C extension holds the interpreter's lock (a node's bound on a hung teardown).
 """
 from __future__ import annotations
 
+import ctypes
 import os
 import signal
 import subprocess
@@ -117,6 +119,69 @@ def watch_parent(on_exit: Callable[[], None], poll: float = 0.2) -> Optional[thr
     thread = threading.Thread(target=wait, name="moose-parent-watch", daemon=True)
     thread.start()
     return thread
+
+
+class _SigVal(ctypes.Union):
+    _fields_ = [("sival_int", ctypes.c_int), ("sival_ptr", ctypes.c_void_p)]
+
+
+class _SigEvThread(ctypes.Structure):
+    _fields_ = [("function", ctypes.c_void_p), ("attribute", ctypes.c_void_p)]
+
+
+class _SigEvUnion(ctypes.Union):
+    _fields_ = [("pad", ctypes.c_int * 12), ("tid", ctypes.c_int), ("thread", _SigEvThread)]
+
+
+class _SigEvent(ctypes.Structure):
+    """``struct sigevent`` of Linux (64 bytes on 64-bit systems)."""
+
+    _fields_ = [("value", _SigVal), ("signo", ctypes.c_int), ("notify", ctypes.c_int), ("un", _SigEvUnion)]
+
+
+class _TimeSpec(ctypes.Structure):
+    _fields_ = [("tv_sec", ctypes.c_long), ("tv_nsec", ctypes.c_long)]
+
+
+class _ITimerSpec(ctypes.Structure):
+    _fields_ = [("it_interval", _TimeSpec), ("it_value", _TimeSpec)]
+
+
+SIGEV_THREAD = 2
+"""``sigev_notify``: call a function on a new thread at expiry (signal.h)."""
+CLOCK_MONOTONIC = 1
+"""``clockid_t`` of the monotonic clock (time.h)."""
+
+
+def exit_later(seconds: float, status: int = 0) -> str:
+    """End this process with ``_exit(status)`` in ``seconds``, whatever its threads are doing.
+
+    A POSIX timer (``timer_create`` with ``SIGEV_THREAD``) whose expiry calls the C library's ``_exit`` with
+    ``status`` on a thread of the C library's own: it needs neither the interpreter's lock nor its main thread,
+    so a C extension that hangs while holding the lock (rclpy's ``destroy_node`` does not release it, and hung in
+    Fast DDS's teardown) cannot hold it off, as it would a Python thread.  Where the C library has no such timer
+    (not glibc), a Python timer thread does it.  Returns which of the two is armed: ``"posix"`` or ``"python"``."""
+    whole, frac = divmod(max(seconds, 1e-3), 1.0)
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        create, settime, end = libc.timer_create, libc.timer_settime, libc._exit
+    except (AttributeError, OSError):
+        create = None
+    if create is not None:
+        event = _SigEvent()
+        event.notify = SIGEV_THREAD
+        event.value.sival_int = status
+        event.un.thread.function = ctypes.cast(end, ctypes.c_void_p).value
+        timer = ctypes.c_void_p()
+        spec = _ITimerSpec()
+        spec.it_value.tv_sec, spec.it_value.tv_nsec = int(whole), int(frac * 1e9)
+        if create(CLOCK_MONOTONIC, ctypes.byref(event), ctypes.byref(timer)) == 0:
+            if settime(timer, 0, ctypes.byref(spec), None) == 0:
+                return "posix"
+    fallback = threading.Timer(seconds, os._exit, (status,))
+    fallback.daemon = True
+    fallback.start()
+    return "python"
 
 
 def stop(procs: Iterable[Child], grace: float = 5.0) -> dict[int, int]:

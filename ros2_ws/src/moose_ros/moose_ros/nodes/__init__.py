@@ -24,7 +24,7 @@ from typing import Any, Callable, Sequence
 from moose.params import ParamError
 
 from ..graph import NODES
-from ..process import watch_parent
+from ..process import exit_later, watch_parent
 
 
 def node_class(name: str) -> Callable[[Any], Any]:
@@ -113,26 +113,33 @@ TEARDOWN_GRACE = 10.0
 ``destroy_node`` hung in Fast DDS's participant deletion in about one launch of twenty (ros2/rclpy#456 and
 ros2/build_cop#248 are of its kind), so a node that ended normally was killed at the launcher's grace
 (``moose_ros.launch.STOP_GRACE``, longer) and the run counted as degraded."""
+TEARDOWN_DUMP = 0.5
+"""Seconds between the stacks of a hung teardown and the end of the process (time to write them)."""
 _stopping: list[threading.Timer] = []
 
 
 def _teardown_watchdog(name: str) -> None:
-    """Exit with status 0 if the process has not ended within :data:`TEARDOWN_GRACE` seconds (started once, from
-    the first call): the node's work is done and its last status sent; the run's log gets every thread's stack and
-    a line saying so, so a hang in the teardown is visible, not hidden."""
+    """Exit with status 0 if the process has not ended within :data:`TEARDOWN_GRACE` seconds (armed once, at the
+    first call): the node's work is done and its last status sent; the run's log gets every thread's stack, so a
+    hang in the teardown is visible, not hidden.
+
+    rclpy's ``destroy_node`` holds the interpreter's lock while it waits in the middleware (no Python thread runs
+    then), so the stacks come from :mod:`faulthandler`'s own thread and the exit from a POSIX timer
+    (:func:`moose_ros.process.exit_later`), neither of which needs the lock; a Python timer adds a line saying what
+    happened, when the lock is free to write it."""
     if _stopping:
         return
 
-    def expire() -> None:
-        faulthandler.dump_traceback(all_threads=True)
-        print(f"{name}: the middleware's teardown did not end within {TEARDOWN_GRACE:g} s (stacks above): exiting",
+    def explain() -> None:
+        print(f"{name}: the middleware's teardown did not end within {TEARDOWN_GRACE:g} s (stacks follow): exiting",
               file=sys.stderr, flush=True)
-        os._exit(0)
 
-    timer = threading.Timer(TEARDOWN_GRACE, expire)
+    timer = threading.Timer(TEARDOWN_GRACE, explain)
     timer.daemon = True
     timer.start()
     _stopping.append(timer)
+    faulthandler.dump_traceback_later(TEARDOWN_GRACE + TEARDOWN_DUMP / 5, exit=False, file=sys.stderr)
+    exit_later(TEARDOWN_GRACE + TEARDOWN_DUMP, 0)
 
 
 PARENT_GRACE = 3.0
@@ -143,9 +150,7 @@ def _parent_gone() -> None:
     """The process that started this node is gone (:func:`moose_ros.process.watch_parent`): stop as on SIGTERM,
     and exit hard if that does not end the process within :data:`PARENT_GRACE`."""
     print("the process that started this node is gone: shutting down", file=sys.stderr, flush=True)
-    timer = threading.Timer(PARENT_GRACE, os._exit, (1,))
-    timer.daemon = True
-    timer.start()
+    exit_later(PARENT_GRACE, 1)
     os.kill(os.getpid(), signal.SIGTERM)
 
 
