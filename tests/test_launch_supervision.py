@@ -16,7 +16,7 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Iterator
+from typing import Any, Iterator, Optional
 
 import pytest
 
@@ -214,6 +214,50 @@ def test_a_node_that_fails_to_start_ends_the_run_at_once(tmp_path: Path) -> None
     failed = [i for i in summary["incidents"] if i["kind"] == "failed_to_start"]
     assert failed and "can_log" in failed[0]["message"]
     assert summary["outcome"] == "incomplete" and summary["exit_status"] == 3
+
+
+def _node_pid(name: str) -> Optional[int]:
+    """The process id of node ``name`` below this process (``/proc``), if it runs."""
+    for pid in descendants(os.getpid()):
+        try:
+            args = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        if b"moose_ros.nodes" in args and name.encode() in args:
+            return pid
+    return None
+
+
+def test_a_finished_status_that_arrives_after_the_simulator_exited_is_a_finished_run(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The simulator sends its ``finished`` status, then exits; on a loaded machine the launcher can see the exit
+    first (an rclpy run under load was judged incomplete, exit 3, although the simulator had finished).  Here the
+    launcher's monitor takes that status (and what follows it) in only once the launcher has reaped the simulator's
+    process: the run is still a finished one (moose_ros.launch.FINISH_DRAIN)."""
+    from moose_ros.monitor import Monitor
+
+    received = Monitor.on_diagnostics
+    held: list[Any] = []
+    simulator: list[int] = []
+
+    def late(self: Monitor, m: Any) -> None:
+        if not simulator:
+            simulator.extend(filter(None, [_node_pid("vehicle_simulator")]))
+        if any(s.name == "vehicle_simulator" and s.message.startswith("finished") for s in m.status) or held:
+            held.append(m)
+        if held and simulator and not os.path.exists(f"/proc/{simulator[0]}"):  # reaped by the launcher
+            for m in held:
+                received(self, m)
+            held.clear()
+        elif not held:
+            received(self, m)
+
+    monkeypatch.setattr(Monitor, "on_diagnostics", late)
+    summary = launch(load_scenario("paper_v5_tau3"), {"scenario": "paper_v5_tau3"}, out=io.StringIO(),
+                     lockstep=True)
+    assert simulator and not held, (simulator, held)
+    assert summary["node_status"]["vehicle_simulator"] == "finished", summary["node_status"]
+    assert summary["outcome"] != "incomplete" and "cut short" not in summary["reason"], summary["reason"]
 
 
 @pytest.mark.realtime

@@ -85,6 +85,11 @@ DOMAIN_CHECK = 1.0
 """Seconds the launcher listens for other nodes in its DDS domain before it starts any (:func:`check_domain`)."""
 LOCKSTEP_MIN_RATE = 0.05
 """The slowest lockstep run the launcher waits for (simulated seconds per wall-clock second), beyond start-up."""
+FINISH_DRAIN = 5.0
+"""Seconds the launcher keeps listening for the simulator's ``finished`` status once its process has exited with 0
+and the status has not arrived: the simulator sends it before it exits, but on a loaded machine the launcher can see
+the exit first (1 of 40 rclpy launches, four at once on 2 cores, was judged ``incomplete``, exit 3, although the
+simulator had finished)."""
 
 
 def _file_params(params_file: Optional[str], node: str) -> dict[str, Any]:
@@ -414,13 +419,20 @@ class Supervisor:
                 detail = " | ".join(self.last_lines.get(name, [])) or "no output"
                 self.log.add(t_sim, name, "failed_to_start", f"exited with {_status_text(code)} before it "
                                                              f"announced itself: {detail}")
-            elif name == "vehicle_simulator" and code == 0 and self.monitor.finished:
+            elif name == "vehicle_simulator" and code == 0 and self._heard_finish():
                 self.ends[name] = "finished"
             else:
                 self.ends[name] = f"died ({_status_text(code)})"
                 self.log.add(t_sim, name, "died", f"exited with {_status_text(code)} during the run"
                              + (" (the injected fault)" if name in self.injector.killed else ""))
                 self.say(f"node {name} exited with status {code}; the graph keeps running")
+
+    def _heard_finish(self) -> bool:
+        """Whether the simulator's ``finished`` status arrived, listening up to :data:`FINISH_DRAIN` for it."""
+        deadline = time.monotonic() + FINISH_DRAIN
+        while not self.monitor.finished and time.monotonic() < deadline:
+            self.node.spin_once(0.05)
+        return self.monitor.finished
 
     def ended_by_nodes(self) -> bool:
         """Whether the nodes ended the run: one failed to start, or the simulator ended (cut short unless it had
