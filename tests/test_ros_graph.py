@@ -234,3 +234,43 @@ def test_moose_launch_reports_a_collision_that_cannot_be_avoided(tmp_path: Path)
     assert summary["outcome"] == "collision" and summary["collided"] is True
     # through the middle of a 2 m long zone: at most 1 m from its ends, at least 0.5 m deep (3 m from its sides)
     assert -1.0 - 1e-9 <= summary["min_clearance_m"] < -0.5
+
+
+def test_a_real_time_simulator_starts_its_clock_only_once_the_monitor_reads_it() -> None:
+    """Real time: the simulator starts simulated time only once its publishers reach every reader it expects, the
+    launcher's monitor among them (``monitored``).  An rclpy monitor on a loaded machine matched the odometry
+    0.45 s into the run and judged it incomplete; here the reader joins 2 s after the simulator is up, and its first
+    odometry sample is still the run's first."""
+    from moose_ros.graph import ODOM, TOPICS
+    from moose_ros.lockstep import MONITORED
+    from moose_ros.process import spawn, stop
+    from moose_ros.runtime import create_node
+
+    sim = spawn([sys.executable, "-m", "moose_ros.nodes", "vehicle_simulator", "--param", "scenario=paper_v5_tau3",
+                 "--param", "monitored=true", "--param", "rate=2"],
+                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    node = None
+    try:
+        assert sim.stdout is not None
+        lines = []
+        for line in sim.stdout:
+            lines.append(line)
+            if "vehicle_simulator started" in line:
+                break
+        assert any("vehicle_simulator started" in line for line in lines), "".join(lines)
+        time.sleep(2.0)  # the monitor joins late (at rate 2 the run would be 4 simulated s on without the wait)
+        node = create_node("moose_monitor", overrides={"use_sim_time": False})
+        stamps: list[float] = []
+        for name in MONITORED:  # what the launcher's monitor reads
+            topic = TOPICS[name]
+            node.subscription(topic.type, name, (lambda m: stamps.append(m.header.stamp.sec + 1e-9 *
+                                                                         m.header.stamp.nanosec))
+                              if topic is ODOM else (lambda m: None), topic.tool_qos)
+        deadline = time.monotonic() + 60.0
+        while not stamps and time.monotonic() < deadline:
+            node.spin_once(0.05)
+    finally:
+        if node is not None:
+            node.shutdown()
+        stop([sim], grace=10.0)
+    assert stamps and stamps[0] <= 0.011, stamps[:3]

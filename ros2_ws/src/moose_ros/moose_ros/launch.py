@@ -129,9 +129,9 @@ def node_overrides(graph: str, planner: str, params: Optional[dict[str, Any]] = 
                          "real time)")
     if simulated:
         given.update(seed=seed, rate=rate, vehicle_bus="can" if "can_bridge" in nodes else "topics")
+    given["monitored"] = True  # this launcher's monitor reads the graph: nothing of the first tick passes it by
     if lockstep:
         given["lockstep_nodes"] = list(nodes)
-        given["lockstep_monitor"] = True  # this launcher's monitor reads the graph: nothing of tick 0 passes it by
     if "can_interface" in given:
         from moose.canbus.bus import INTERFACES
 
@@ -450,12 +450,15 @@ class Supervisor:
     def watch_heartbeats(self) -> None:
         """A running node silent on /diagnostics for longer than the topic's deadline (on its own clock: simulated
         time for the nodes on ``use_sim_time`` or in lockstep, the wall clock for the others) is a ``stalled``
-        incident, once per silence."""
+        incident, once per silence.  The simulator is not watched once it has finished: it is going away (it waits
+        up to ``FINAL_DELIVERY`` for its readers' acknowledgements, then tears down), and the launcher awaits its
+        exit."""
         deadline = DIAGNOSTICS.deadline
         assert deadline is not None
         now_wall, now_sim = time.monotonic(), self.monitor.sim_time
         for name in self.procs:
-            if name in self.exits or name not in self.monitor.heard:
+            if name in self.exits or name not in self.monitor.heard or (name == "vehicle_simulator"
+                                                                          and self.monitor.finished):
                 continue
             wall, sim = self.monitor.heard[name]
             on_sim = bool(self.overrides[name].get("use_sim_time") or self.overrides[name].get("lockstep_nodes"))

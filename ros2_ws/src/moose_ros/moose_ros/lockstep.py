@@ -22,7 +22,7 @@ t + d).
   (:class:`moose.timing.DelayLine`), the planning delay in ``weight_fbl``'s planning step, the command delay in
   the simulator (or the ECU emulator); no delay is left to the scheduler.
 
-The launcher's monitor (:data:`MONITOR`, with the node parameter ``lockstep_monitor``) is not in the pipeline: it
+The launcher's monitor (:data:`MONITOR`, with the node parameter ``monitored``) is not in the pipeline: it
 judges and records the run and computes nothing the graph reads.  It acknowledges the odometry it has read on its
 own marker, and the simulator keeps at most :data:`MONITOR_LAG` ticks ahead of it, so that a slow launcher slows
 the graph rather than losing what it must judge and record.
@@ -81,12 +81,12 @@ BUS_POLL = 0.001
 to wait on (python-can's ``virtual`` bus); otherwise the frames wake it (:meth:`moose_ros.runtime.base.NodeBase.watch`:
 polling every millisecond cost the CAN graph's two bus parties CPU time for every wall-clock millisecond of a run)."""
 MONITORED: tuple[str, ...] = tuple(t.name for t in (ODOM, STEERING, PLAN_MPC, BLEND, THREAT, DIAGNOSTICS))
-"""What the launcher's monitor reads (:meth:`moose_ros.monitor.Monitor.attach`): with ``lockstep_monitor`` a lockstep
+"""What the launcher's monitor reads (:meth:`moose_ros.monitor.Monitor.attach`): with ``monitored`` a lockstep
 publisher of these waits for its reader as for the graph's, so the summary misses nothing of tick 0."""
 MONITOR = "moose_monitor"
 """The launcher's monitor node (:mod:`moose_ros.monitor`), a reader of the graph outside its pipeline."""
 MONITOR_LAG = DEPTH // 2
-"""Ticks the launcher's monitor may fall behind the simulator (with ``lockstep_monitor``): the simulator steps past
+"""Ticks the launcher's monitor may fall behind the simulator (with ``monitored``): the simulator steps past
 tick k only when the monitor has acknowledged tick k − MONITOR_LAG on its marker.  The monitor, and the recorder in
 its process, read with a keep-last depth of :data:`DEPTH`; a reader that falls further behind than that loses
 samples (a gap in the run's odometry: an incomplete verdict, a bag with holes), which a starved launcher did while

@@ -42,9 +42,10 @@ class NodeParams:
     lockstep_nodes: tuple[str, ...] = ()
     """The nodes of the graph when it runs in lockstep (``moose launch --lockstep``, :mod:`moose_ros.lockstep`);
     empty: real time."""
-    lockstep_monitor: bool = False
-    """Lockstep: a launcher's monitor reads the graph (:data:`moose_ros.lockstep.MONITORED`); the node's publishers
-    of those topics wait for it as for the graph's readers."""
+    monitored: bool = False
+    """A launcher's monitor reads the graph (:data:`moose_ros.lockstep.MONITORED`): the node's publishers of those
+    topics wait for it as for the graph's readers (in lockstep every node's; in real time the simulator's, before
+    simulated time starts)."""
 
     def __post_init__(self) -> None:
         unknown = [n for n in self.lockstep_nodes if n not in NODES]

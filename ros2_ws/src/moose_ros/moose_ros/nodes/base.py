@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import time
 from collections import Counter
-from typing import TYPE_CHECKING, Any, Callable, Iterable, Optional
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Optional, Sequence
 
 from .. import convert as cv
 from ..graph import (
@@ -129,6 +129,8 @@ class GraphNode:
             self.config = self.params.load_scenario().configure(self.config)
         # transient local: a late joiner (the simulator waiting for the graph) sees each node's last status
         self._diag = DIAGNOSTICS.publisher(rt)
+        self._writers: dict[str, Publisher] = {DIAGNOSTICS.name: self._diag}
+        """This node's publishers by topic (:meth:`deliver`)."""
         self.level, self.message = OK, "running"
         self.values: dict[str, Any] = {}
         self.problems: dict[str, tuple[int, str]] = {}
@@ -190,12 +192,15 @@ class GraphNode:
     def publisher(self, topic: Topic) -> Callable[[Any], None]:
         """A publisher of ``topic`` on this node; in lockstep each message is announced in the tick's marker, and
         the publisher offers :data:`moose_ros.lockstep.QOS_DATA` (nothing a lockstep reader waits for is lost)."""
+        watched = bool(getattr(self.params, "monitored", False)) and topic.name in MONITORED
         if self.join is None:
-            return topic.publisher(self.rt)
+            pub = self._writers[topic.name] = topic.publisher(self.rt)
+            if hasattr(self.params, "wait_for"):  # real time: the simulator starts simulated time once its first
+                self._pubs.append((pub, readers(topic, self.params.wait_for) + watched))  # samples reach every reader
+            return pub
         qos = QOS_DATA if not topic.qos.transient_local else QOS_MARKER
-        pub = self.rt.publisher(topic.type, topic.name, qos)
+        pub = self._writers[topic.name] = self.rt.publisher(topic.type, topic.name, qos)
         nodes = tuple(getattr(self.params, "lockstep_nodes", ()))
-        watched = bool(getattr(self.params, "lockstep_monitor", False)) and topic.name in MONITORED
         self._pubs.append((pub, readers(topic, [n for n in nodes if n != self.name]) + watched))
         name = topic.name
 
@@ -205,9 +210,19 @@ class GraphNode:
 
         return publish
 
+    def deliver(self, topics: Sequence[Topic], timeout: float) -> bool:
+        """Wait up to ``timeout`` seconds in all until every reliable reader of this node's publishers of ``topics``
+        has acknowledged what they sent (:meth:`moose_ros.runtime.base.Publisher.wait_acknowledged`): what a node
+        sends before it goes away (a deleted writer takes what its readers have not acknowledged with it).  Whether
+        they all have; a reader that was killed never acknowledges, and the wait then ends at ``timeout``."""
+        deadline = time.monotonic() + timeout
+        return all([self._writers[t.name].wait_acknowledged(max(deadline - time.monotonic(), 0.0))
+                    for t in topics if t.name in self._writers])
+
     def matched(self) -> bool:
-        """Lockstep: every publisher of this node reaches every node of the graph that reads it (nothing of tick 0
-        may go to a reader not yet discovered)."""
+        """Every publisher of this node reaches every node of the graph that reads it, and the launcher's monitor
+        where it reads the topic (nothing of tick 0 may go to a reader not yet discovered): a lockstep node's, and
+        in real time the simulator's (the nodes it waits for)."""
         return all(pub.subscription_count() >= count for pub, count in self._pubs)
 
     def clock(self) -> float:

@@ -94,9 +94,9 @@ class Publisher:
     """Publishes messages of one type on one topic: ``pub(msg)`` or ``pub.publish(msg)``."""
 
     def __init__(self, topic: str, type_name: str, publish: Callable[[Any], None],
-                 count: Callable[[], int]) -> None:
+                 count: Callable[[], int], acknowledged: Callable[[float], bool]) -> None:
         self.topic, self.type_name = topic, type_name
-        self._publish, self._count = publish, count
+        self._publish, self._count, self._acknowledged = publish, count, acknowledged
 
     def __call__(self, msg: Any) -> None:
         self._publish(msg)
@@ -107,6 +107,13 @@ class Publisher:
     def subscription_count(self) -> int:
         """Number of matched subscriptions (remote and local)."""
         return self._count()
+
+    def wait_acknowledged(self, timeout: float) -> bool:
+        """Wait up to ``timeout`` seconds until every matched reliable reader has acknowledged every sample published
+        (DDS ``wait_for_acknowledgments``; rclpy's ``wait_for_all_acked``); whether they all have.  A writer that is
+        deleted takes the samples its readers have not acknowledged with it: what a node says last before it goes
+        away waits for this."""
+        return self._acknowledged(timeout)
 
 
 class _Watch:

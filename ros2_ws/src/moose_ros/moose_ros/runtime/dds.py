@@ -241,7 +241,8 @@ class DdsNode(NodeBase):
                     raise TypeError(f"cannot publish {type_name} on {full!r}: {exc} ({cause})") from None
 
         self._track("publisher", full, type_name, qos)
-        return Publisher(full, type_name, publish, lambda: matched_subscriptions(writer))
+        return Publisher(full, type_name, publish, lambda: matched_subscriptions(writer),
+                         lambda timeout: bool(writer.wait_for_acks(int(max(timeout, 0.0) * 1e9))))
 
     def subscription(self, type_name: str, topic: str, callback: Callable[[Any], None],
                      qos: Qos = QOS_DEFAULT) -> Handle:

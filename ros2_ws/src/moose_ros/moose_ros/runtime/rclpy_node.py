@@ -279,8 +279,13 @@ class RclpyNode(NodeBase):
                 raise TypeError(f"publishing {type(msg).__name__} on {full!r}, which carries {type_name!r}")
             pub.publish(msg)
 
+        def acknowledged(timeout: float) -> bool:
+            from rclpy.duration import Duration
+
+            return bool(pub.wait_for_all_acked(Duration(nanoseconds=int(max(timeout, 0.0) * 1e9))))
+
         self._track("publisher", full, type_name, qos)
-        return Publisher(full, type_name, publish, pub.get_subscription_count)
+        return Publisher(full, type_name, publish, pub.get_subscription_count, acknowledged)
 
     def subscription(self, type_name: str, topic: str, callback: Callable[[Any], None],
                      qos: Qos = QOS_DEFAULT) -> Handle:
