@@ -118,9 +118,11 @@ def test_each_node_gets_only_the_parameters_it_takes() -> None:
     overrides = node_overrides("can", "mpc", {"scenario": "paper_v5_tau3", "can_log": "bus.log", "can_port": 5000},
                                seed=4, rate=2.0)
     assert "msf_planner" not in overrides
+    # every node: its own parameters, the planner mode, simulated time, and that the launcher's monitor reads it
     assert overrides["can_bridge"] == {"can_log": "bus.log", "can_port": 5000, "simulation.planner": "mpc",
-                                       "use_sim_time": True}
-    assert overrides["observer"] == {"scenario": "paper_v5_tau3", "simulation.planner": "mpc", "use_sim_time": True}
+                                       "use_sim_time": True, "monitored": True}
+    assert overrides["observer"] == {"scenario": "paper_v5_tau3", "simulation.planner": "mpc", "use_sim_time": True,
+                                     "monitored": True}
     assert overrides["vehicle_simulator"]["seed"] == 4 and overrides["vehicle_simulator"]["vehicle_bus"] == "can"
     assert overrides["vehicle_simulator"]["wait_for"] == [n for n in overrides if n != "vehicle_simulator"]
 

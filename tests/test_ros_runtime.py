@@ -388,3 +388,41 @@ def test_rclpy_backend_when_ros2_is_installed(ros_env: dict[str, str]) -> None:
     result = subprocess.run([ros_env["MOOSE_ROS_PYTHON"], "-c", RCLPY_CHECK], env=ros_env, capture_output=True,
                             text=True, timeout=120)
     assert result.returncode == 0 and "rclpy backend ok" in result.stdout, result.stderr[-3000:]
+
+
+STOPPED_READER = textwrap.dedent("""
+    import os, signal, sys
+    from moose_ros.runtime import QOS_DEFAULT, DdsNode
+    node = DdsNode("stopped_reader")
+    node.subscription("moose_msgs/msg/WheelSpeeds", "/rt_test/acks", lambda m: None, QOS_DEFAULT)
+    print("subscribed", flush=True)
+    os.kill(os.getpid(), signal.SIGSTOP)  # matched, and from now on it acknowledges nothing
+""")
+
+
+def test_wait_acknowledged_says_whether_every_reader_acknowledged() -> None:
+    """A live reader acknowledges what was published (True at once); a reader in a stopped process never does: the
+    wait ends at its timeout with False (Cyclone's Python binding raises an AttributeError of its own then)."""
+    from moose_ros.process import spawn, stop
+
+    talker = DdsNode("ack_talker")
+    pub = talker.publisher(WHEELS, "/rt_test/acks", QOS_DEFAULT)
+    listener = DdsNode("ack_listener")
+    listener.subscription(WHEELS, "/rt_test/acks", lambda m: None, QOS_DEFAULT)
+    stopped = None
+    try:
+        assert spin_until(talker, lambda: pub.subscription_count() == 1)
+        pub(talker.make(WHEELS, omega_rl=1.0))
+        assert pub.wait_acknowledged(10.0)
+        stopped = spawn([sys.executable, "-c", STOPPED_READER], stdout=subprocess.PIPE, text=True)
+        assert stopped.stdout is not None and stopped.stdout.readline().strip() == "subscribed"
+        assert spin_until(talker, lambda: pub.subscription_count() == 2, 30)
+        pub(talker.make(WHEELS, omega_rl=2.0))
+        started = time.monotonic()
+        assert pub.wait_acknowledged(0.5) is False
+        assert 0.4 < time.monotonic() - started < 10.0
+    finally:
+        if stopped is not None:
+            stop([stopped], grace=1.0)
+        talker.shutdown()
+        listener.shutdown()

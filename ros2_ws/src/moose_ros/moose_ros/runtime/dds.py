@@ -97,6 +97,16 @@ def matched_subscriptions(writer: Any) -> int:
     return len(writer.get_matched_subscriptions())
 
 
+def acknowledged(writer: Any, timeout: float) -> bool:
+    """Whether every reliable reader matched with ``writer`` acknowledged all it wrote, waiting up to ``timeout``
+    seconds.  cyclonedds-python (0.10) answers a timeout with an AttributeError of its own (its ``wait_for_acks``
+    looks up ``DDS_RETCODE_TIMEOUT`` on Python's ``Exception``): that is a timeout too."""
+    try:
+        return bool(writer.wait_for_acks(int(max(timeout, 0.0) * 1e9)))
+    except AttributeError:
+        return False
+
+
 class _Timer:
     """A timer of the DDS executor: ``callback`` every ``period`` s of the node's timer clock."""
 
@@ -242,7 +252,7 @@ class DdsNode(NodeBase):
 
         self._track("publisher", full, type_name, qos)
         return Publisher(full, type_name, publish, lambda: matched_subscriptions(writer),
-                         lambda timeout: bool(writer.wait_for_acks(int(max(timeout, 0.0) * 1e9))))
+                         lambda timeout: acknowledged(writer, timeout))
 
     def subscription(self, type_name: str, topic: str, callback: Callable[[Any], None],
                      qos: Qos = QOS_DEFAULT) -> Handle:
