@@ -308,24 +308,31 @@ def test_failing_cases_are_recorded_and_the_sweep_goes_on(tmp_path: Path) -> Non
     slow = rows[(120.0, 0.00001)]  # 121 simulated seconds at a 100 kHz plant step: about 9 s of work
     assert slow["status"] == "timeout" and "4 s" in slow["error"] and slow["wall_s"] >= 4.0
 
-    # a worker killed under its case (SIGKILL from outside): recorded as crashed, the sweep runs the rest.
-    # Every case is long (60 s at a 10 kHz plant step, several seconds of work), and a worker holds its
-    # case from the moment it is started.
+    # a worker killed under its case (SIGKILL from outside): recorded as crashed, the sweep runs the rest.  Both
+    # workers are held (SIGSTOP) as soon as they exist, and the journal is then empty: each holds its first case
+    # (given at its start), none finished, whatever this machine's speed (ci17: on a fast host the 60-s cases this
+    # test had took under a second, the kill 1 s after the start found a worker between cases, nothing crashed).
+    # The cases are long (40 s at 1 m/s, inside the field, at a 100 kHz plant step: about 3 s of work here).
     out2 = tmp_path / "s2"
-    args2 = MOOSE + ["sweep", "--speed", "6", "--tau", "2", "--nu", "0.5", "--planner", "msf", "--duration", "60",
-                     "--set", "simulation.plant_dt=0.0001", "--seeds", "3", "--workers", "2", "-o", str(out2),
-                   "--quiet"]
+    args2 = MOOSE + ["sweep", "--speed", "1", "--tau", "2", "--nu", "0.5", "--planner", "msf", "--duration", "40",
+                     "--set", "simulation.plant_dt=0.00001", "--seeds", "3", "--workers", "2", "-o", str(out2),
+                     "--quiet"]
     process = subprocess.Popen(args2, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
 
     def workers() -> list[int]:
         return [p for p in _children(process.pid) if "spawn_main" in " ".join(psutil.Process(p).cmdline())]
 
+    held: list[int] = []
     try:
         _wait_for(lambda: len(workers()) == 2, 60, "two workers")
-        time.sleep(1.0)
-        os.kill(workers()[0], signal.SIGKILL)
+        held = workers()
+        _signal_all(held, signal.SIGSTOP)
+        assert journal(out2) == [], "a case finished before the workers were held"
+        os.kill(held[0], signal.SIGKILL)
+        _signal_all(held[1:], signal.SIGCONT)
         process.communicate(timeout=300)
     finally:
+        _signal_all(held, signal.SIGCONT)
         if process.poll() is None:
             os.killpg(process.pid, signal.SIGKILL)
             process.wait()
