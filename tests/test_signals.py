@@ -114,3 +114,17 @@ def test_velocity_directions_follow_rep_103() -> None:
 def test_sideslip_angle(vx: float, vy: float, beta: float) -> None:
     e = StateEstimate(t=0.0, x=0.0, y=0.0, theta=0.3, vx=vx, vy=vy, gamma=0.0, delta=0.0)
     assert e.beta == pytest.approx(beta, abs=1e-12)
+
+
+def test_time_to_collision_at_its_edges() -> None:
+    """τ = distance / v_x while the car closes in (v_x above 1e-9 m/s, however slowly); at a standstill, infinite
+    before the obstacle and 0 at or past it."""
+    from moose.signals import time_to_collision
+
+    assert time_to_collision(10.0, 5.0) == 2.0
+    assert time_to_collision(10.0, 0.5) == 20.0
+    assert time_to_collision(10.0, 1e-9) == math.inf  # not closing in
+    assert time_to_collision(0.5, 0.0) == math.inf
+    assert time_to_collision(0.0, 0.0) == 0.0
+    assert time_to_collision(-1.0, 0.0) == 0.0
+    assert time_to_collision(-1.0, 2.0) == -0.5  # the near edge behind the CoG

@@ -350,3 +350,14 @@ def test_segment_box_test_equals_the_separating_axis_test(segment: tuple) -> Non
     sides = [(x1 - x0) * (cy - y0) - (y1 - y0) * (cx - x0) for cx, cy in corners]
     separated = all(s > 0 for s in sides) or all(s < 0 for s in sides)
     assert segment_hits_box(x0, y0, x1, y1, box) == (overlap and not separated)
+
+
+def test_exit_status_of_each_outcome_degraded_and_interrupted() -> None:
+    """0 clear, 1 a failure, 3 incomplete; 4 only for a clear run that was degraded; 130 for Ctrl-C only."""
+    from moose.verdict import EXIT_DEGRADED, EXIT_INTERRUPTED, exit_status
+
+    outcomes = ("clear", "collision", "left_field", "lost_control", "stopped_short", "incomplete")
+    assert [exit_status(o) for o in outcomes] == [0, 1, 1, 1, 1, 3]
+    assert [exit_status(o, degraded=True) for o in outcomes] == [EXIT_DEGRADED, 1, 1, 1, 1, 3] and EXIT_DEGRADED == 4
+    assert exit_status("collision", interrupted="SIGINT") == EXIT_INTERRUPTED == 130
+    assert [exit_status(o, interrupted="SIGTERM") for o in outcomes] == [0, 1, 1, 1, 1, 3]
