@@ -143,3 +143,34 @@ def test_frame_stats_add_up() -> None:
     assert stats.snapshot() == {"unknown_id": 1, "bad_length": 2, "bad_checksum": 3, "bad_counter": 4, "undecodable": 5,
                                 "out_of_range": 6, "error_frames": 7, "lost": 8, "own_id": 9}
     assert set(PROTECTED) == {"CMD_STEER", "CMD_TORQUE"}
+
+
+def test_own_is_what_the_codecs_node_transmits() -> None:
+    """An echo of the bridge's own command on the bus is its own; the vehicle's frames and unknown identifiers are not,
+    and a codec of no node owns nothing."""
+    bridge, vehicle, nobody = Codec(node="BRIDGE"), Codec(node="VEHICLE"), Codec()
+    command = can.Message(arbitration_id=0x100, data=bytes(8), is_extended_id=False)
+    eps = can.Message(arbitration_id=0x200, data=bytes(8), is_extended_id=False)
+    unknown = can.Message(arbitration_id=0x7FF, data=bytes(8), is_extended_id=False)
+    assert [bridge.own(f) for f in (command, eps, unknown)] == [True, False, False]
+    assert [vehicle.own(f) for f in (command, eps, unknown)] == [False, True, False]
+    assert [nobody.own(f) for f in (command, eps, unknown)] == [False, False, False]
+
+
+def test_cycle_time_is_one_positive_whole_number_of_milliseconds() -> None:
+    """The common GenMsgCycleTime of frames, in seconds; frames that differ, a zero, a fraction or none are refused
+    with the frames named."""
+    from types import SimpleNamespace
+
+    from moose.canbus.codec import cycle_time
+    from moose.params import ParamError
+
+    def db(**times: object) -> SimpleNamespace:
+        return SimpleNamespace(get_message_by_name=lambda name: SimpleNamespace(cycle_time=times[name]))
+
+    assert cycle_time(DB, "CMD_STEER", "CMD_TORQUE") == 0.01
+    assert cycle_time(db(A=1, B=1), "A", "B") == 0.001
+    for bad in (db(A=10, B=20), db(A=0, B=0), db(A=10.5, B=10.5), db(A=None, B=None), db(A=-10, B=-10)):
+        with pytest.raises(ParamError, match=r"GenMsgCycleTime of \{'A': .*, 'B': .*\} is invalid: expected one "
+                                             r"positive cycle time \(ms\) for all"):
+            cycle_time(bad, "A", "B")

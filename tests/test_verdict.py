@@ -361,3 +361,20 @@ def test_exit_status_of_each_outcome_degraded_and_interrupted() -> None:
     assert [exit_status(o, degraded=True) for o in outcomes] == [EXIT_DEGRADED, 1, 1, 1, 1, 3] and EXIT_DEGRADED == 4
     assert exit_status("collision", interrupted="SIGINT") == EXIT_INTERRUPTED == 130
     assert [exit_status(o, interrupted="SIGTERM") for o in outcomes] == [0, 1, 1, 1, 1, 3]
+
+
+def test_segments_that_touch_the_closed_box_at_any_edge_are_candidates() -> None:
+    """judge's prefilter (the segments whose bounding boxes meet the box) keeps a segment that only touches the closed
+    box at an edge or a corner, from either side: such a touch is a hit (segment_hits_box)."""
+    from moose.verdict import _near
+
+    box = Obstacle(0.0, 1.0, 0.0, 1.0)
+    touching = [((1.0, 2.0), (0.5, 0.5)),  # from the far x edge outwards
+                ((-1.0, 0.0), (0.5, 0.5)),  # ending on the near x edge
+                ((0.5, 0.5), (1.0, 2.0)),  # from the upper y edge upwards
+                ((0.5, 0.5), (-1.0, 0.0)),  # ending on the lower y edge
+                ((1.0, 2.0), (1.0, 2.0))]  # from the corner (1, 1) away
+    for xs, ys in touching:
+        assert _near(np.array(xs), np.array(ys), box) == [0], (xs, ys)
+        assert segment_hits_box(xs[0], ys[0], xs[1], ys[1], box)
+    assert _near(np.array([1.01, 2.0]), np.array([0.5, 0.5]), box) == []
