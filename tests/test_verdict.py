@@ -378,3 +378,13 @@ def test_segments_that_touch_the_closed_box_at_any_edge_are_candidates() -> None
         assert _near(np.array(xs), np.array(ys), box) == [0], (xs, ys)
         assert segment_hits_box(xs[0], ys[0], xs[1], ys[1], box)
     assert _near(np.array([1.01, 2.0]), np.array([0.5, 0.5]), box) == []
+
+
+def test_changed_limits_names_each_limit_that_differs() -> None:
+    """The verdict's limits that differ from the defaults, each with its default, comma-separated; none: empty."""
+    from moose.verdict import DEFAULT_PARAMS, changed_limits, limits_of
+
+    default = limits_of(DEFAULT_PARAMS)
+    assert changed_limits(default) == ""
+    assert changed_limits({**default, "sideslip_max": 10.0, "max_gap": 0.5}) == (
+        "sideslip_max = 10 instead of 0.35, max_gap = 0.5 instead of 0.2")

@@ -321,3 +321,30 @@ def test_the_first_step_counts_with_the_fbl_steering_not_the_kinematic_one() -> 
     expected = alpha / v.delta_max
     assert wf(n_rho=3).steering_usage(first_only, EST) == pytest.approx(expected, rel=1e-9)
     assert expected < VEHICLE.wheelbase * 1.0 / 7.0**2 / VEHICLE.delta_max  # the kinematic value would be larger
+
+
+def test_remaining_reads_the_offset_from_the_ego_path_at_any_width() -> None:
+    """``remaining``: ỹ is the offset from the ego path y_path (here y = 3 m, not 0); a narrow danger zone (w < 1 m)
+    is read like any other; w = 0 (nothing to evade) reads ν = 0, not a division by zero."""
+    f = wf(nu_reading="remaining")
+    shifted = Threat(0.0, Obstacle(20.0, 22.0, 1.0, 5.0), 3.0, 2.0, 0.4, 1, 3.0)
+    f.weight(plan(0.5), shifted, EST)
+    at = StateEstimate(0.0, 14.0, 4.0, 0.0, 7.0, 0.0, 0.0, 0.0)  # 1 m toward the evasion side of the path
+    assert f.threat_reading(shifted, at) == (3.0, pytest.approx(0.4 * (2.0 - 1.0) / 2.0))
+    narrow = Threat(0.0, Obstacle(20.0, 22.0, -2.0, 0.8), 3.0, 0.8, 0.3, 1, 0.0)
+    f = wf(nu_reading="remaining")
+    f.weight(plan(0.5), narrow, EST)
+    assert f.threat_reading(narrow, StateEstimate(0.0, 14.0, 0.2, 0.0, 7.0, 0.0, 0.0, 0.0)) == (
+        3.0, pytest.approx(0.3 * 0.6 / 0.8))
+    nothing = Threat(0.0, Obstacle(20.0, 22.0, -2.0, 0.0), 3.0, 0.0, 0.0, 1, 0.0)
+    f = wf(nu_reading="remaining")
+    f.weight(plan(0.5), nothing, EST)
+    assert f.threat_reading(nothing, StateEstimate(0.0, 14.0, -0.5, 0.0, 7.0, 0.0, 0.0, 0.0)) == (3.0, 0.0)
+
+
+def test_the_detection_is_latched_even_when_no_mpc_plan_came() -> None:
+    """A blend without an MPC plan (a failed or late solve) still records the obstacle's detection: ``at_detection``
+    then reads the τ and ν of that first instant, not of a later one."""
+    f = wf(nu_reading="at_detection")
+    f.blend(None, plan(0.5), threat(tau=3.0, nu=0.3), EST)
+    assert f.threat_reading(threat(tau=0.5, nu=3.0), EST) == (3.0, 0.3)
