@@ -388,3 +388,13 @@ def test_changed_limits_names_each_limit_that_differs() -> None:
     assert changed_limits(default) == ""
     assert changed_limits({**default, "sideslip_max": 10.0, "max_gap": 0.5}) == (
         "sideslip_max = 10 instead of 0.35, max_gap = 0.5 instead of 0.2")
+
+
+def test_a_segment_that_crosses_the_box_on_the_way_back_is_a_candidate() -> None:
+    """The prefilter bounds each segment by its own two samples: a path that passes the box and comes back through
+    it (in x, then in y) has that crossing segment as a candidate, wherever the path started."""
+    from moose.verdict import _near
+
+    box = Obstacle(0.0, 1.0, 0.0, 1.0)
+    assert _near(np.array([-5.0, 5.0, 5.0, -5.0]), np.array([5.0, 5.0, 0.5, 0.5]), box) == [2]
+    assert _near(np.array([5.0, 5.0, 0.5, 0.5]), np.array([-5.0, 5.0, 5.0, -5.0]), box) == [2]
