@@ -153,6 +153,10 @@ def test_a_fix_pairs_its_two_frames_by_counter_within_the_window() -> None:
     bridge.on_frame(other[0], 20.0)
     next_fix = ecu.frames([GpsSample(4.0, 3.8, 3.0, 3.0, 3.0, 3.0)], 4.0)
     assert bridge.on_frame(next_fix[1], 20.01) is None  # the velocity of another fix (another counter)
+    position, velocity = ecu.frames([GpsSample(5.0, 4.8, 4.0, 4.0, 4.0, 4.0)], 5.0)
+    bridge.on_frame(position, 30.0)
+    assert isinstance(bridge.on_frame(velocity, 30.01), GpsSample)
+    assert bridge.on_frame(velocity, 30.02) is None  # the same velocity frame again: its position is used up
 
 
 def test_the_measured_angle_reaches_the_guard_end_stop() -> None:
