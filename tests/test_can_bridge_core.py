@@ -156,7 +156,8 @@ def test_a_fix_pairs_its_two_frames_by_counter_within_the_window() -> None:
     position, velocity = ecu.frames([GpsSample(5.0, 4.8, 4.0, 4.0, 4.0, 4.0)], 5.0)
     bridge.on_frame(position, 30.0)
     assert isinstance(bridge.on_frame(velocity, 30.01), GpsSample)
-    assert bridge.on_frame(velocity, 30.02) is None  # the same velocity frame again: its position is used up
+    _, lone = ecu.frames([GpsSample(6.0, 5.8, 5.0, 5.0, 5.0, 5.0)], 6.0)
+    assert bridge.on_frame(lone, 31.0) is None  # its position frame lost: the last position is used up
 
 
 def test_the_measured_angle_reaches_the_guard_end_stop() -> None:
