@@ -71,9 +71,11 @@ BUS_TOPICS: dict[str, tuple[str, ...]] = {"vehicle_simulator": (ACTUATOR_COMMAND
 DEPTH = 100
 """Keep-last depth of the markers and of every input a lockstep node reads (a tick carries a few messages)."""
 QOS_MARKER = Qos(reliable=True, depth=DEPTH, transient_local=True)
-QOS_DATA = Qos(reliable=True, depth=DEPTH)
+QOS_DATA = Qos(reliable=True, depth=DEPTH, transient_local=True)
 """What a lockstep node's data publishers offer and its subscriptions request: nothing may be lost, since a
-node waits for every message a marker announces."""
+node waits for every message a marker announces.  Transient local: a writer sees its reader matched before the
+reader has matched the writer, and a volatile reader that matches late starts after what was already sent; the
+lockstep replay into an observer (tests/test_bags.py) once waited 60 s for a tick-0 sample lost so."""
 MATCH_RETRY = 0.02
 """Wall-clock period (s) at which a lockstep node retries a tick it could not handle yet (discovery at start)."""
 BUS_POLL = 0.001
