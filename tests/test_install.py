@@ -8,10 +8,11 @@ import shutil
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
+
+from node_output import read_until_started
 
 pytestmark = pytest.mark.slow
 
@@ -71,14 +72,7 @@ def test_wheels_install_into_a_fresh_environment_and_run_from_anywhere(tmp_path:
     node = subprocess.Popen([str(venv / "bin" / "observer"), "--param", "scenario=paper_v5_tau3"], cwd=elsewhere,
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
-        deadline = time.monotonic() + 60.0
-        lines = []
-        while time.monotonic() < deadline:
-            line = node.stdout.readline() if node.stdout else ""
-            lines.append(line)
-            if "observer started" in line or not line:
-                break
-        assert any("observer started" in line for line in lines), "".join(lines)
+        read_until_started(node, "observer")
         node.send_signal(signal.SIGTERM)
         node.wait(timeout=20)
     finally:

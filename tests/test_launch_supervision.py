@@ -24,6 +24,7 @@ from moose.params import ParamError
 from moose.scenario import load_scenario
 from moose_ros.launch import launch
 from moose_ros.process import descendants, spawn, state, stop
+from node_output import read_until_started
 
 pytestmark = [pytest.mark.graph, pytest.mark.slow]
 
@@ -370,13 +371,7 @@ def test_a_node_whose_middleware_teardown_hangs_exits_and_says_where(tmp_path: P
     node = spawn([sys.executable, "-m", "moose_ros.nodes", "observer", "--param", "scenario=paper_v5_tau3"], env=env,
                  stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
-        assert node.stdout is not None
-        lines = []
-        for line in node.stdout:
-            lines.append(line)
-            if "observer started" in line:
-                break
-        assert any("observer started" in line for line in lines), "".join(lines)
+        read_until_started(node, "observer")
         node.send_signal(signal.SIGTERM)
         out, _ = node.communicate(timeout=60)
     finally:

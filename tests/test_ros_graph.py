@@ -26,6 +26,7 @@ from moose.params import ParamError
 from moose.scenario import load_scenario
 from moose_ros.launch import launch
 from moose_ros.runtime import DdsNode
+from node_output import read_until_started
 
 pytestmark = [pytest.mark.graph, pytest.mark.slow]
 
@@ -251,13 +252,7 @@ def test_a_real_time_simulator_starts_its_clock_only_once_the_monitor_reads_it()
                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     node = None
     try:
-        assert sim.stdout is not None
-        lines = []
-        for line in sim.stdout:
-            lines.append(line)
-            if "vehicle_simulator started" in line:
-                break
-        assert any("vehicle_simulator started" in line for line in lines), "".join(lines)
+        read_until_started(sim, "vehicle_simulator")
         time.sleep(2.0)  # the monitor joins late (at rate 2 the run would be 4 simulated s on without the wait)
         node = create_node("moose_monitor", overrides={"use_sim_time": False})
         stamps: list[float] = []
