@@ -128,10 +128,12 @@ def _publisher(node: Any, m: BagMessage, lockstep: bool) -> Any:
     """The player's publisher of ``m``'s topic: reliable, so the player drops nothing (a reliable writer matches
     best-effort readers too); latched topics keep their durability (a volatile writer never matches a
     transient-local reader); in lockstep what a lockstep reader requests (:data:`moose_ros.lockstep.QOS_DATA`)."""
+    if lockstep:
+        return node.publisher(m.type_name, m.topic, QOS_DATA)
     contract = TOPICS.get(m.topic)
     if contract is not None and contract.qos.transient_local:
-        return node.publisher(m.type_name, m.topic, QOS_MARKER if lockstep else contract.qos)
-    return node.publisher(m.type_name, m.topic, QOS_DATA if lockstep else QOS_DEFAULT)
+        return node.publisher(m.type_name, m.topic, contract.qos)
+    return node.publisher(m.type_name, m.topic, QOS_DEFAULT)
 
 
 def _clock(node: Any, stamp_ns: int) -> Any:

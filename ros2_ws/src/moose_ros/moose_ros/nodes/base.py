@@ -44,7 +44,6 @@ from ..graph import (
     subscribes,
 )
 from ..lockstep import (
-    DEPTH,
     MATCH_RETRY,
     MONITORED,
     QOS_DATA,
@@ -60,7 +59,6 @@ from ..lockstep import (
 )
 from ..parameters import node_parameters
 from ..runtime.base import Handle, NodeBase, Publisher
-from ..runtime.qos import Qos
 
 if TYPE_CHECKING:  # imported in GraphNode.table only: the nodes that build no table do not load it
     from moose.maneuver import MaxSteeringTable
@@ -198,8 +196,7 @@ class GraphNode:
             if hasattr(self.params, "wait_for"):  # real time: the simulator starts simulated time once its first
                 self._pubs.append((pub, readers(topic, self.params.wait_for) + watched))  # samples reach every reader
             return pub
-        qos = QOS_DATA if not topic.qos.transient_local else QOS_MARKER
-        pub = self._writers[topic.name] = self.rt.publisher(topic.type, topic.name, qos)
+        pub = self._writers[topic.name] = self.rt.publisher(topic.type, topic.name, QOS_DATA)
         nodes = tuple(getattr(self.params, "lockstep_nodes", ()))
         self._pubs.append((pub, readers(topic, [n for n in nodes if n != self.name]) + watched))
         name = topic.name
@@ -260,8 +257,7 @@ class GraphNode:
                 self._arrived(name, handler, record)
 
         if self.join is not None and name in self.join.topics:
-            return self.rt.subscription(topic.type, name, on_message, QOS_DATA if not topic.qos.transient_local
-                                        else Qos(reliable=True, depth=DEPTH, transient_local=True))
+            return self.rt.subscription(topic.type, name, on_message, QOS_DATA)
         return topic.subscription(self.rt, on_message)
 
     def _arrived(self, name: str, handler: Callable[[Any], None], record: Any) -> None:
