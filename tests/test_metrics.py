@@ -326,3 +326,16 @@ def test_idle_planning_steps_are_no_threat_and_nothing_warns() -> None:
         s = summarize(hand_made(planning=idle))
     assert s["mean_weight_mpc"] is None and s["notes"]["mean_weight_mpc"] == "no planning step had a threat"
     assert s["mpc_solve_ms"]["count"] == 5
+
+
+def test_summarize_passes_the_criticality_request_on(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``summarize(result, criticality=True)`` asks :func:`moose.commonroad.assess.assess` for the measures: told
+    here that the CommonRoad packages are missing, its note says so, where a summary not asking for them says they
+    were not asked for (commonroad-crime itself takes seconds to import: tests/test_commonroad.py runs it)."""
+    import moose.commonroad.assess as assess_module
+
+    monkeypatch.setattr(assess_module, "available", lambda: False)
+    asked, not_asked = summarize(hand_made(), criticality=True), summarize(hand_made())
+    assert asked["criticality"] is None and not_asked["criticality"] is None
+    assert "not installed" in asked["notes"]["criticality"], asked["notes"]
+    assert not_asked["notes"]["criticality"] == "not computed: ask with --criticality"
