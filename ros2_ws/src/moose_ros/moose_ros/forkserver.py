@@ -24,6 +24,7 @@ still signal it.  The server ends when the launcher closes its end.
 """
 from __future__ import annotations
 
+import gc
 import json
 import os
 import queue
@@ -296,6 +297,7 @@ def main(argv: Sequence[str]) -> None:
     """``python -m moose_ros.forkserver FD NODE…``: preload for ``NODE…``, then serve on the socket ``FD``."""
     channel = socket.socket(fileno=int(argv[0]))
     preload(argv[1:])
+    gc.freeze()  # the preloaded heap is every child's: no collection in a child touches (and so copies) its pages
     serve(channel)
 
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import faulthandler
+import gc
 import importlib
 import os
 import signal
@@ -94,6 +95,10 @@ def run(name: str, argv: Sequence[str] = ()) -> int:
     except BaseException:  # refused to start (ParamError: the CAN bridge without its bus): leave the domain
         rt.shutdown()
         raise
+    # what the node built to start (modules, message classes, compiled functions, the core's tables) lives as long as
+    # the process: out of the collector's sight, a full collection scans only what the ticks allocate (the lockstep
+    # full graph took about 11 % less CPU, docs/testing.md)
+    gc.freeze()
     node.publish_diagnostics()  # announce: the simulator starts the clock when every node has
     rt.log_info(f"{name} started (DDS discovery {rt.describe_discovery()})")
     try:
