@@ -359,6 +359,39 @@ HANGS = {"lock released": "time.sleep(3600)",
 (rclpy's ``destroy_node`` calls into the middleware without releasing it: no Python thread runs)."""
 
 
+PARTICIPANT_DELETION_HANGS = '''
+import ctypes
+from cyclonedds.domain import DomainParticipant
+DomainParticipant.__del__ = lambda self: ctypes.CDLL(None).sleep(3600)  # in C, the interpreter's lock released
+'''
+"""What Cyclone DDS 11's ``ddsi_stop`` did in about one launch of twenty: the participant's deletion never returns
+(moose_ros.runtime.dds.DdsNode.release_limit)."""
+
+
+def test_a_participant_deletion_that_never_returns_ends_the_node_after_its_limit(tmp_path: Path) -> None:
+    """A node on Cyclone DDS whose participant deletion hangs ends with status 0 after
+    moose_ros.nodes.RELEASE_LIMIT (2 s) and says why, not after the teardown watchdog's 10 s."""
+    from moose_ros.nodes import RELEASE_LIMIT, TEARDOWN_GRACE
+
+    assert RELEASE_LIMIT < TEARDOWN_GRACE / 2
+    (tmp_path / "sitecustomize.py").write_text(PARTICIPANT_DELETION_HANGS)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")]),
+           "MOOSE_RUNTIME": "dds"}
+    node = spawn([sys.executable, "-m", "moose_ros.nodes", "observer", "--param", "scenario=paper_v5_tau3"], env=env,
+                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        read_until_started(node, "observer")
+        node.send_signal(signal.SIGTERM)
+        out, _ = node.communicate(timeout=60)
+    finally:
+        if node.poll() is None:
+            node.kill()
+            node.wait()
+    assert node.returncode == 0, out[-3000:]
+    assert (f"observer: Cyclone DDS's participant deletion did not end within {RELEASE_LIMIT:g} s" in out
+            and "the middleware's teardown did not end" not in out), out[-3000:]
+
+
 @pytest.mark.parametrize("how", HANGS)
 def test_a_node_whose_middleware_teardown_hangs_exits_and_says_where(tmp_path: Path, how: str) -> None:
     """The node's work is done once it stops; a teardown that never returns (rclpy's destroy_node in Fast DDS,

@@ -59,6 +59,7 @@ def run(name: str, argv: Sequence[str] = ()) -> int:
     """Start node ``name`` and spin it until shutdown; returns the exit status."""
     from ..parameters import check_parameter_file
     from ..runtime import backend, create_node
+    from ..runtime.dds import DdsNode
 
     parser = argparse.ArgumentParser(prog=f"moose node {name}", epilog="On rclpy, --ros-args and what follows are "
                                      "ROS 2's (ros2 run and ros2 launch pass remappings and parameters so).")
@@ -74,6 +75,8 @@ def run(name: str, argv: Sequence[str] = ()) -> int:
     if args.params:
         check_parameter_file(args.params)
     rt = create_node(name, args.params, parse_overrides(args.param))
+    if isinstance(rt, DdsNode):
+        rt.release_limit = RELEASE_LIMIT
     node = None
 
     def terminate(*_: Any) -> None:  # SIGTERM: the end of a run, or the launcher is gone — a normal end, status 0
@@ -118,6 +121,11 @@ TEARDOWN_GRACE = 10.0
 ``destroy_node`` hung in Fast DDS's participant deletion in about one launch of twenty (ros2/rclpy#456 and
 ros2/build_cop#248 are of its kind), so a node that ended normally was killed at the launcher's grace
 (``moose_ros.launch.STOP_GRACE``, longer) and the run counted as degraded."""
+RELEASE_LIMIT = 2.0
+"""Seconds a node on Cyclone DDS gives its participant's deletion, the last step of its teardown
+(:attr:`moose_ros.runtime.dds.DdsNode.release_limit`: Cyclone DDS 11 can wait for it for ever), before it ends with
+status 0 and a line saying so; it takes 0.1-0.3 s here, and the teardown's watchdog (:data:`TEARDOWN_GRACE`) bounds
+the rest."""
 TEARDOWN_DUMP = 0.5
 """Seconds between the stacks of a hung teardown and the end of the process (time to write them)."""
 _stopping: list[threading.Timer] = []

@@ -40,6 +40,8 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import sys
+import threading
 import time
 from collections import deque
 from typing import Any, Callable, Optional
@@ -135,6 +137,17 @@ class _Reader:
 
 class DdsNode(NodeBase):
     """A node on Cyclone DDS with ROS 2 wire conventions (see the module docstring)."""
+
+    release_limit: Optional[float] = None
+    """Seconds the participant's deletion may take before the process ends with status 0; ``None``: no bound (a
+    participant in a process that goes on, as the launcher's monitor).  The node runner sets it
+    (:data:`moose_ros.nodes.RELEASE_LIMIT`): the process ends after the deletion anyway, and Cyclone DDS 11 can wait
+    for it for ever.  Its ``ddsi_stop`` stops the event queue, then deletes what is left and waits, without a bound,
+    until every participant is gone; a writer that still has samples not acknowledged then lingers, and its linger
+    ends by an event of the stopped queue, or by an acknowledgement that the receive threads, stopped too, never
+    take (``ddsi_delete_writer``: the participant is never gone).  In 4 of 89 lockstep launches with nodes
+    started by exec, a node hung so in ``ddsi_init.c`` at ``participant_set_cond`` until the node's teardown
+    watchdog (gdb, 2026-12-03).  The participant's SPDP dispose is out by then: its peers know it left."""
 
     def __init__(self, name: str, params_file: Optional[str] = None, overrides: Optional[dict[str, Any]] = None,
                  namespace: Optional[str] = None) -> None:
@@ -513,8 +526,21 @@ class DdsNode(NodeBase):
         except Exception:  # noqa: BLE001 - the participant is deleted below in any case
             pass
         # deleting the participant deletes its readers, writers, topics and waitset in Cyclone DDS
+        overrun = None
+        if self.release_limit is not None:  # Cyclone's deletion runs in C with the interpreter's lock released
+            overrun = threading.Timer(self.release_limit, self._release_overrun)
+            overrun.daemon = True
+            overrun.start()
         participant.__del__()
+        if overrun is not None:
+            overrun.cancel()
         self._readers, self._writers, self._topics, self._discovery = [], [], {}, []
+
+    def _release_overrun(self) -> None:
+        """The participant's deletion outlasted :attr:`release_limit`: say so and end the process (status 0)."""
+        print(f"{self.name}: Cyclone DDS's participant deletion did not end within {self.release_limit:g} s (a "
+              "writer still lingering when ddsi_stop stopped the event queue): exiting", file=sys.stderr, flush=True)
+        os._exit(0)
 
 
 _DOMAINS: dict[int, tuple[Optional[str], Any]] = {}
