@@ -15,7 +15,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Optional
 
 import pytest
 
@@ -346,6 +346,14 @@ def test_failing_cases_are_recorded_and_the_sweep_goes_on(tmp_path: Path) -> Non
 
 # -- Dask ------------------------------------------------------------------------------------------------
 
+def _scheduler_address(path: Path) -> Optional[str]:
+    """The address in a Dask scheduler file, or None while the file is missing or not yet whole."""
+    try:
+        return str(json.loads(path.read_text())["address"])
+    except (OSError, ValueError, KeyError):
+        return None
+
+
 @pytest.mark.slow
 def test_dask_cluster_gives_the_rows_of_the_local_backend(tmp_path: Path) -> None:
     pytest.importorskip("distributed")
@@ -356,8 +364,11 @@ def test_dask_cluster_gives_the_rows_of_the_local_backend(tmp_path: Path) -> Non
                                  stderr=subprocess.DEVNULL, start_new_session=True)
     worker = None
     try:
-        _wait_for(scheduler_file.exists, 60, "the Dask scheduler")
-        address = json.loads(scheduler_file.read_text())["address"]
+        # the scheduler writes its file in place: it can exist, empty or cut short, before it holds the address
+        # (ci22: JSONDecodeError on an empty file)
+        _wait_for(lambda: _scheduler_address(scheduler_file) is not None, 60, "the Dask scheduler")
+        address = _scheduler_address(scheduler_file)
+        assert address is not None
         worker = subprocess.Popen([str(dask), "worker", address, "--nworkers", "2", "--nthreads", "1",
                                    "--no-dashboard", "--host", "127.0.0.1"], stdout=subprocess.DEVNULL,
                                   stderr=subprocess.DEVNULL, start_new_session=True)
