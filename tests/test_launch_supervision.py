@@ -359,22 +359,10 @@ HANGS = {"lock released": "time.sleep(3600)",
 (rclpy's ``destroy_node`` calls into the middleware without releasing it: no Python thread runs)."""
 
 
-PARTICIPANT_DELETION_HANGS = '''
-import ctypes
-from cyclonedds.domain import DomainParticipant
-DomainParticipant.__del__ = lambda self: ctypes.CDLL(None).sleep(3600)  # in C, the interpreter's lock released
-'''
-"""What Cyclone DDS 11's ``ddsi_stop`` did in about one launch of twenty: the participant's deletion never returns
-(moose_ros.runtime.dds.DdsNode.release_limit)."""
-
-
-def test_a_participant_deletion_that_never_returns_ends_the_node_after_its_limit(tmp_path: Path) -> None:
-    """A node on Cyclone DDS whose participant deletion hangs ends with status 0 after
-    moose_ros.nodes.RELEASE_LIMIT (2 s) and says why, not after the teardown watchdog's 10 s."""
-    from moose_ros.nodes import RELEASE_LIMIT, TEARDOWN_GRACE
-
-    assert RELEASE_LIMIT < TEARDOWN_GRACE / 2
-    (tmp_path / "sitecustomize.py").write_text(PARTICIPANT_DELETION_HANGS)
+def observer_stopped_with(tmp_path: Path, sitecustomize: str) -> tuple[int, str]:
+    """Start the observer on Cyclone DDS with ``sitecustomize`` (written to ``tmp_path``, first on its path), stop it
+    with SIGTERM once it has started; its exit status and output."""
+    (tmp_path / "sitecustomize.py").write_text(sitecustomize)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")]),
            "MOOSE_RUNTIME": "dds"}
     node = spawn([sys.executable, "-m", "moose_ros.nodes", "observer", "--param", "scenario=paper_v5_tau3"], env=env,
@@ -387,7 +375,26 @@ def test_a_participant_deletion_that_never_returns_ends_the_node_after_its_limit
         if node.poll() is None:
             node.kill()
             node.wait()
-    assert node.returncode == 0, out[-3000:]
+    return node.returncode, out
+
+
+PARTICIPANT_DELETION_HANGS = '''
+import ctypes
+from cyclonedds.domain import DomainParticipant
+DomainParticipant.__del__ = lambda self: ctypes.CDLL(None).sleep(3600)  # in C, the interpreter's lock released
+'''
+"""What Cyclone DDS 11's ``ddsi_stop`` did in 4 of 89 launches with nodes started by exec: the participant's deletion
+never returns (moose_ros.runtime.dds.DdsNode.release_limit)."""
+
+
+def test_a_participant_deletion_that_never_returns_ends_the_node_after_its_limit(tmp_path: Path) -> None:
+    """A node on Cyclone DDS whose participant deletion hangs ends with status 0 after
+    moose_ros.nodes.RELEASE_LIMIT (2 s) and says why, not after the teardown watchdog's 10 s."""
+    from moose_ros.nodes import RELEASE_LIMIT, TEARDOWN_GRACE
+
+    assert RELEASE_LIMIT < TEARDOWN_GRACE / 2
+    status, out = observer_stopped_with(tmp_path, PARTICIPANT_DELETION_HANGS)
+    assert status == 0, out[-3000:]
     assert (f"observer: Cyclone DDS's participant deletion did not end within {RELEASE_LIMIT:g} s" in out
             and "the middleware's teardown did not end" not in out), out[-3000:]
 
@@ -398,20 +405,8 @@ def test_a_node_whose_middleware_teardown_hangs_exits_and_says_where(tmp_path: P
     once in ~20 launches) ends the process with status 0 after moose_ros.nodes.TEARDOWN_GRACE, with every thread's
     stack in its output (and a line saying so, when the interpreter's lock is free to write it), instead of running
     into the launcher's SIGKILL."""
-    (tmp_path / "sitecustomize.py").write_text(TEARDOWN_HANGS.format(hang=HANGS[how]))
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")]),
-           "MOOSE_RUNTIME": "dds"}
-    node = spawn([sys.executable, "-m", "moose_ros.nodes", "observer", "--param", "scenario=paper_v5_tau3"], env=env,
-                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
-        read_until_started(node, "observer")
-        node.send_signal(signal.SIGTERM)
-        out, _ = node.communicate(timeout=60)
-    finally:
-        if node.poll() is None:
-            node.kill()
-            node.wait()
-    assert node.returncode == 0, out[-3000:]
+    status, out = observer_stopped_with(tmp_path, TEARDOWN_HANGS.format(hang=HANGS[how]))
+    assert status == 0, out[-3000:]
     explained = "observer: the middleware's teardown did not end within 1 s (stacks follow): exiting" in out
     assert explained == (how == "lock released"), out[-3000:]
     assert "most recent call first" in out and "sitecustomize.py" in out  # where it hung: the main thread's stack
