@@ -164,6 +164,17 @@ CONFORMANCE = textwrap.dedent(r'''
     watcher.spin_once(0.3)
     out["watch"] = [quiet, [b.decode() for b in seen], all(threads), len(polled) >= 3]
     watcher.shutdown()
+
+    # the graph as `ros2 node list` shows it, and the launcher's refusal of a domain where a moose graph's node runs
+    from moose_ros.launch import check_domain
+    probe = node("domain_probe")
+    out["domain_free"] = errors(lambda: check_domain(probe, wait=0.5))
+    left = node("observer")
+    spin_until(probe, lambda: ("/", "observer") in probe.node_names())
+    out["node_names"] = [list(n) for n in probe.node_names() if n[1] in ("observer", "domain_probe")]
+    out["domain_taken"] = errors(lambda: check_domain(probe, wait=10.0))
+    left.shutdown()
+    probe.shutdown()
     print(json.dumps(out))
 ''')
 
@@ -260,6 +271,11 @@ def test_runtimes_behave_the_same(ros_env: dict[str, str], tmp_path: Path) -> No
     assert rclpy["latched"] == [7.0]
     assert rclpy["shutdown"] == [True, [1]]
     assert rclpy["watch"] == [[], ["a", "b"], True, True]  # in the executor's thread; nothing after cancel
+    assert rclpy["domain_free"] == [None] and rclpy["node_names"] == [["/", "observer"]]  # not itself
+    domain = ros_env.get("ROS_DOMAIN_ID", "0") or "0"
+    assert rclpy["domain_taken"] == [f"DDS domain {domain} (ROS_DOMAIN_ID) already has nodes of a moose graph: "
+                                     "/observer; a graph left from an earlier run, or another launch: stop it (moose "
+                                     "launch stops its nodes when it ends or is killed) or use another ROS_DOMAIN_ID"]
 
 
 def test_stock_rclpy_executor_does_not_keep_publication_order(ros_env: dict[str, str]) -> None:
