@@ -143,8 +143,8 @@ def test_a_graph_tests_processes_measure_the_packages_only_they_run() -> None:
 def test_unmeasured_graph_processes_are_those_of_the_listed_files_but_the_listed_cases(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """tests/conftest.py's choice of graph tests whose processes coverage does not measure: the files of
-    UNMEASURED_CHILDREN, but the tests of MEASURED_CASES, each a test the suite collects, and no test marked
-    realtime; with
+    UNMEASURED_CHILDREN, but the tests of MEASURED_CASES, and the tests of UNMEASURED_CASES (each listed test one the
+    suite collects), and no test marked realtime; with
     MOOSE_COVERAGE_CONTEXTS=1 every graph test's processes are measured, in a context named after the test."""
     import base64
     import json
@@ -152,13 +152,15 @@ def test_unmeasured_graph_processes_are_those_of_the_listed_files_but_the_listed
 
     from coverage.config import CoverageConfig
 
-    from conftest import CONTEXTS, MEASURED_CASES, UNMEASURED_CHILDREN, children_config
+    from conftest import CONTEXTS, MEASURED_CASES, UNMEASURED_CASES, UNMEASURED_CHILDREN, children_config
 
-    files = sorted({case.split("::")[0] for case in MEASURED_CASES})
-    assert {Path(f).name for f in files} <= UNMEASURED_CHILDREN
+    assert {Path(case.split("::")[0]).name for case in MEASURED_CASES} <= UNMEASURED_CHILDREN
+    assert not {Path(case.split("::")[0]).name for case in UNMEASURED_CASES} & UNMEASURED_CHILDREN
+    files = sorted({case.split("::")[0] for case in MEASURED_CASES | UNMEASURED_CASES})
     collected = subprocess.run([sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:randomly", *files],
                                capture_output=True, text=True, timeout=120, cwd=ROOT).stdout.splitlines()
-    assert MEASURED_CASES <= set(collected), MEASURED_CASES - set(collected)
+    listed = MEASURED_CASES | UNMEASURED_CASES
+    assert listed <= set(collected), listed - set(collected)
     config = CoverageConfig()
     config.source_pkgs = ["moose", "moose_ros"]
     serialised = config.serialize()
@@ -173,6 +175,9 @@ def test_unmeasured_graph_processes_are_those_of_the_listed_files_but_the_listed
     assert children_config(item(unmeasured), serialised) is None  # type: ignore[arg-type]
     assert children_config(item(case), serialised) is not None  # type: ignore[arg-type]
     assert children_config(item("tests/test_ros_graph.py::test_x"), serialised) is not None  # type: ignore[arg-type]
+    skipped = sorted(UNMEASURED_CASES)[0]
+    assert children_config(item(skipped), serialised) is None  # type: ignore[arg-type]
+    assert children_config(item(skipped + "_too"), serialised) is not None  # type: ignore[arg-type]  # its file's others
     assert children_config(item("tests/test_ros_graph.py::test_x", "realtime"), serialised) is None  # type: ignore[arg-type]
     monkeypatch.setenv(CONTEXTS, "1")
     labelled = children_config(item(unmeasured), serialised)  # type: ignore[arg-type]
