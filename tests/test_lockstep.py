@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from moose_ros.faults import Fault
 from moose_ros.graph import GRAPHS
-from moose_ros.lockstep import ROOT, TickJoin, listeners, waits
+from moose_ros.lockstep import ROOT, TickJoin, listeners, root_reads, waits
 
 FULL = GRAPHS["full"]
 
@@ -14,14 +14,46 @@ def test_each_node_waits_for_the_root_its_upstream_and_the_feedback_one_tick_lat
     assert waits("motion_controller", FULL) == {ROOT: 0, "observer": 0, "weight_fbl": 0}
     assert waits("mpc_planner", FULL) == {"weight_fbl": 1, ROOT: 0, "observer": 0, "obstacle_detector": 0}
     assert waits("msf_planner", FULL) == waits("mpc_planner", FULL)  # both hear the blends in flight
-    assert waits(ROOT, FULL) == {n: 0 for n in FULL if n != ROOT}
+    assert waits(ROOT, FULL) == {n: 0 for n in FULL if n != ROOT}  # the bag player: every node it drives
+    assert waits(ROOT, FULL, ()) == {"motion_controller": 0}  # the simulator without faults: the commands' marker
     can = GRAPHS["can"]  # the bridge makes the sensor topics and forwards the commands: it handles a tick last
     assert waits("observer", can) == {"can_bridge": 1, ROOT: 0}  # its samples one tick later: the bus hop
     assert waits("motion_controller", can) == {"can_bridge": 1, ROOT: 0, "observer": 0, "weight_fbl": 0}
     assert waits("can_bridge", can) == {ROOT: 0, "motion_controller": 0}  # the tick's commands go out in the tick
-    assert waits(ROOT, can)["can_bridge"] == 0  # the simulator steps with the command frames of the tick
-    assert listeners("weight_fbl", FULL) == 4  # the planners (its blend), the motion controller, the simulator
+    assert waits(ROOT, can, ()) == {"can_bridge": 0}  # the simulator steps with the command frames of the tick
+    assert listeners("weight_fbl", FULL) == 3  # the planners (its blend), the motion controller
+    assert listeners("motion_controller", FULL) == 1  # the simulator (its commands)
     assert listeners(ROOT, FULL) == len(FULL) - 1
+
+
+def test_the_simulator_reads_the_markers_that_imply_every_other_one() -> None:
+    """The simulator steps past tick k once the nodes of ``root_reads`` have reported k.  Checked against the
+    waits themselves: for every set of nodes a fault plan can leave out, every expected node has a chain of
+    same-tick waits (its marker k is needed before another expected node handles k) to a node the simulator reads."""
+    import itertools
+
+    for graph in ("full", "can"):
+        nodes = GRAPHS[graph]
+        others = [n for n in nodes if n != ROOT]
+        for size in range(len(others) + 1):
+            for faulted in itertools.combinations(others, size):
+                read = root_reads(nodes, faulted)
+                assert read <= set(others)
+                for left in itertools.chain.from_iterable(itertools.combinations(faulted, r)
+                                                          for r in range(len(faulted) + 1)):
+                    expected = set(others) - set(left)
+                    done = {n for n in read if n in expected}  # reported k: so has everything they wait for at k
+                    frontier = list(done)
+                    while frontier:
+                        node = frontier.pop()
+                        for upstream, lag in waits(node, nodes).items():
+                            if lag == 0 and upstream in expected and upstream not in done:
+                                done.add(upstream)
+                                frontier.append(upstream)
+                    assert done == expected, (graph, faulted, left, sorted(expected - done))
+    assert root_reads(FULL, ["weight_fbl"]) == {"mpc_planner", "msf_planner", "motion_controller"}  # blend gone
+    assert root_reads(FULL, ["motion_controller"]) == {"weight_fbl", "motion_controller"}
+    assert root_reads(GRAPHS["can"], ["can_bridge"]) == {"motion_controller", "can_bridge"}
 
 
 def join(node: str) -> TickJoin:

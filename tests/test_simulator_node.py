@@ -138,6 +138,43 @@ def test_a_lockstep_graph_that_stops_reporting_ends_with_lockstep_stuck() -> Non
     assert level == 2 and "lockstep stuck at t = 0.00 s: no tick from observer" in text, text
 
 
+@pytest.mark.parametrize("observer_reports", [False, True], ids=["observer-silent", "detector-silent"])
+def test_a_stuck_graph_names_the_nodes_whose_markers_the_simulator_does_not_read(observer_reports: bool) -> None:
+    """The simulator reads only the markers that imply all others (here the detector's, which waits for the
+    observer's tick); when the graph is stuck it listens to the rest before it names every node that did not report."""
+    from moose_ros.graph import GPS, IMU, OBSTACLES, STEERING, WHEEL_SPEEDS
+    from moose_ros.lockstep import QOS_DATA, QOS_MARKER, TICK_TYPE, marker_message, marker_topic
+
+    nodes = ["vehicle_simulator", "observer", "obstacle_detector"]
+    rt = DdsNode("vehicle_simulator", overrides={"scenario": "paper_v7_tau1.4", "wait_for": [], "use_sim_time": False,
+                                                  "lockstep_nodes": nodes, "lockstep_timeout": 0.5})
+    observer = DdsNode("observer", overrides={"use_sim_time": False})
+    detector = DdsNode("obstacle_detector", overrides={"use_sim_time": False})
+    marker = observer.publisher(TICK_TYPE, marker_topic("observer"), QOS_MARKER)
+
+    def on_root(msg: object) -> None:
+        if observer_reports:  # it reports every tick the root opens, and publishes nothing
+            marker(marker_message(observer.make, "observer", msg.stamp.sec + 1e-9 * msg.stamp.nanosec, []))
+
+    try:
+        sim = VehicleSimulator(rt)
+        assert sim.join is not None and list(sim.join.waits) == ["obstacle_detector"]
+        for topic in (IMU, GPS, WHEEL_SPEEDS, STEERING):
+            observer.subscription(topic.type, topic.name, lambda _msg: None, QOS_DATA)
+        detector.subscription(OBSTACLES.type, OBSTACLES.name, lambda _msg: None, QOS_DATA)
+        observer.subscription(TICK_TYPE, marker_topic("vehicle_simulator"), on_root, QOS_MARKER)
+        detector.subscription(TICK_TYPE, marker_topic("vehicle_simulator"), lambda _msg: None, QOS_MARKER)
+        assert wait_until(lambda: sim.finished, 30.0,
+                          lambda: (rt.spin_once(0.02), observer.spin_once(0.01), detector.spin_once(0.01)))
+    finally:
+        observer.shutdown()
+        detector.shutdown()
+        rt.shutdown()
+    assert sim.message == "stuck" and sim.t == 0.0
+    late = "obstacle_detector" if observer_reports else "observer, obstacle_detector"
+    assert f"lockstep stuck at t = 0.00 s: no tick from {late} for " in sim.problems["lockstep_stuck"][1]
+
+
 def test_a_lockstep_graph_that_never_connects_ends_with_lockstep_stuck() -> None:
     rt = DdsNode("vehicle_simulator", overrides={"scenario": "paper_v7_tau1.4", "wait_for": [], "use_sim_time": False,
                                                   "lockstep_nodes": ["vehicle_simulator", "observer"],

@@ -10,7 +10,9 @@ t + d).
 * The simulator publishes the sensor samples of tick k (those the sensor delay makes due at k), the obstacle
   when it appears, and its marker k; it steps the plant to k + 1 only when every expected node has reported
   tick k (:class:`TickJoin`), with the commands of tick k through the command delay
-  (:class:`moose.timing.CommandHold`).
+  (:class:`moose.timing.CommandHold`).  It reads the markers of the nodes that imply all others
+  (:func:`root_reads`: the last nodes of the tick for each set its fault plan can leave out, and the commands'
+  publisher), not all of them: each marker is a datagram per reader.
 * Every other node handles tick k when the root marker k and the markers of its upstream nodes
   (:func:`waits`: the publishers of its inputs; of tick k for those before it in :data:`PIPELINE`, of tick
   k − 1 for the feedback from those after it, the blend the MPC warm-starts from, the commands the simulator
@@ -109,12 +111,14 @@ def data_topics(node: str) -> list[Topic]:
     return [t for t in subscribes(node) if t is not CLOCK and t is not DIAGNOSTICS]
 
 
-def waits(node: str, nodes: Collection[str]) -> dict[str, int]:
+def waits(node: str, nodes: Collection[str], faulted: Optional[Collection[str]] = None) -> dict[str, int]:
     """Whose markers ``node`` waits for before it handles tick k, and the lag of each (the marker of tick k − lag),
-    in the order their messages are handed over: feedback (lag 1) first, then pipeline order.  The simulator
-    waits for every other node's tick k before it steps past k; every other node for the root's tick k."""
-    if node == ROOT:  # the bridge's command frames of tick k are among what it waits for
-        return {n: 0 for n in PIPELINE if n in nodes and n != ROOT}
+    in the order their messages are handed over: feedback (lag 1) first, then pipeline order.  Every node but the
+    root waits for the root's tick k.  The root steps past k once the nodes of :func:`root_reads` (``faulted``: the
+    nodes of its fault plan) have reported k; with ``faulted`` ``None`` (the bag player), once every node has."""
+    if node == ROOT:
+        chosen = root_reads(nodes, faulted) if faulted is not None else set(nodes)
+        return {n: 0 for n in PIPELINE if n in nodes and n in chosen and n != ROOT}
     position = PIPELINE.index(node)
     out: dict[str, int] = {ROOT: 0}
     for topic in data_topics(node):
@@ -122,6 +126,30 @@ def waits(node: str, nodes: Collection[str]) -> dict[str, int]:
             if publisher in nodes and publisher != node:
                 out[publisher] = 0 if PIPELINE.index(publisher) < position else 1
     return dict(sorted(out.items(), key=lambda item: (-item[1], PIPELINE.index(item[0]))))
+
+
+def sinks(nodes: Collection[str], expected: Collection[str]) -> frozenset[str]:
+    """The nodes of ``expected`` but the root whose tick k no other node of ``expected`` waits for: once they have
+    reported k, every node of ``expected`` has (a node waits for tick k of each expected publisher before it in
+    :data:`PIPELINE`, so every other node has a chain of such waits to one of them)."""
+    present = [n for n in PIPELINE if n in nodes and n in expected and n != ROOT]
+    return frozenset(n for n in present if not any(m != n and waits(m, nodes).get(n) == 0 for m in present))
+
+
+def root_reads(nodes: Collection[str], faulted: Collection[str] = ()) -> frozenset[str]:
+    """The nodes whose markers the root reads: the publishers of its inputs (the commands; on the CAN bus the
+    bridge, whose marker counts the command frames) and the :func:`sinks` of every set of nodes the fault plan can
+    leave out at once (``faulted``: the nodes with a fault).  Every marker the root does not read is one datagram
+    less per tick: in the full graph one marker instead of six (9 % of the lockstep full graph's CPU time,
+    docs/graph.md "Lockstep")."""
+    bus = "can_bridge" in nodes
+    out = {p for t in data_topics(ROOT) if not (bus and t.name in BUS_TOPICS[ROOT])
+           for p in t.publishers if p in nodes and p != ROOT} | ({"can_bridge"} if bus else set())
+    optional = sorted(set(faulted) & set(nodes) - {ROOT})
+    for mask in range(1 << len(optional)):
+        expected = set(nodes) - {n for i, n in enumerate(optional) if mask >> i & 1}
+        out |= sinks(nodes, expected)
+    return frozenset(out)
 
 
 def readers(topic: Topic, nodes: Collection[str]) -> int:
@@ -132,8 +160,10 @@ def readers(topic: Topic, nodes: Collection[str]) -> int:
 
 
 def listeners(node: str, nodes: Collection[str]) -> int:
-    """How many nodes of the graph read ``node``'s marker."""
-    return sum(1 for other in nodes if other != node and node in waits(other, nodes))
+    """How many nodes of the graph read ``node``'s marker whatever the fault plan (the root reads more of them when
+    its plan leaves nodes out, :func:`root_reads`; markers are transient local, so a reader matched after a marker
+    went out still gets it)."""
+    return sum(1 for other in nodes if other != node and node in waits(other, nodes, () if other == ROOT else None))
 
 
 def tick_of(t: float, period: float) -> int:
@@ -153,11 +183,13 @@ def left_out(fault: Any, k: int, period: float) -> bool:
 class TickJoin:
     """Which tick a lockstep node may handle next, and the messages it hands over for it (see the module
     docstring).  Pure bookkeeping, no middleware: the node feeds it every input message (:meth:`message`) and
-    every marker (:meth:`marker`) as they arrive, and :meth:`take` returns the next complete tick."""
+    every marker (:meth:`marker`) as they arrive, and :meth:`take` returns the next complete tick.  ``faulted``
+    (the root only): the nodes of the simulator's fault plan, which say whose markers it reads (:func:`waits`)."""
 
-    def __init__(self, node: str, nodes: Collection[str], topics: Collection[str] = ()) -> None:
+    def __init__(self, node: str, nodes: Collection[str], topics: Collection[str] = (),
+                 faulted: Optional[Collection[str]] = None) -> None:
         self.node = node
-        self.waits = waits(node, nodes)
+        self.waits = waits(node, nodes, faulted)
         self.publishes: dict[str, list[str]] = {}
         """Upstream node → the topics of it this node reads."""
         self.queues: dict[str, deque[Any]] = {}

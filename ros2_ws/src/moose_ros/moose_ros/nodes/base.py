@@ -32,6 +32,7 @@ from collections import Counter
 from typing import TYPE_CHECKING, Any, Callable, Iterable, Optional, Sequence
 
 from .. import convert as cv
+from ..faults import Fault
 from ..graph import (
     CLOCK,
     CYCLE_DEADLINE,
@@ -160,7 +161,10 @@ class GraphNode:
         self._pubs: list[tuple[Publisher, int]] = []
         nodes = tuple(getattr(self.params, "lockstep_nodes", ()))
         if nodes:  # lockstep (moose_ros.lockstep): supervision runs in each tick, not on a timer
-            self.join = TickJoin(self.name, nodes)  # the inputs it reads join as the node subscribes
+            # the inputs it reads join as the node subscribes; the simulator's fault plan says whose markers it reads
+            plan = getattr(self.params, "faults", None)
+            faulted = None if plan is None else [Fault.parse(text).node for text in plan]
+            self.join = TickJoin(self.name, nodes, faulted=faulted)
             self._marker = rt.publisher(TICK_TYPE, marker_topic(self.name), QOS_MARKER)
             self._pubs.append((self._marker, listeners(self.name, nodes)))
             for upstream in self.join.waits:

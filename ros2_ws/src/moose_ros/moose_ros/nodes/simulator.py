@@ -100,6 +100,9 @@ from ..lockstep import (
 from ..runtime.base import NodeBase
 from .base import ERROR, WARN, GraphNode, sensor_publishers
 
+STUCK_PROBE = 1.0
+"""Lockstep: wall-clock seconds the simulator of a stuck graph listens to the markers it does not read (transient
+local: it gets each node's last ticks) before it names every node that did not report the tick."""
 FINAL_DELIVERY = 2.0
 """Seconds the simulator waits, at the end of its run, for its readers to acknowledge the last odometry and its
 ``finished`` status (:meth:`VehicleSimulator.go_away`)."""
@@ -263,6 +266,11 @@ class VehicleSimulator(GraphNode):
         to wait for; -1: none yet)."""
         self.closing: Optional[float] = None
         """Lockstep: since when the run is over and the simulator waits for the monitor to read its last ticks."""
+        self.heard: Optional[dict[str, int]] = None
+        """Lockstep, the graph stuck: the last tick of each node whose marker the simulator does not read, heard by
+        the probe (:data:`STUCK_PROBE`); ``None`` before the graph is stuck."""
+        self.probing: Optional[float] = None
+        """Lockstep: since when that probe listens."""
         if self.lockstep and self.params.monitored:
             self.monitor_tick = -1
             rt.subscription(TICK_TYPE, marker_topic(MONITOR), self.on_monitor, QOS_MARKER)
@@ -382,11 +390,36 @@ class VehicleSimulator(GraphNode):
         if self.finished:
             return
         if now - self.progress > self.params.lockstep_timeout:
-            assert self.join is not None
-            k = self.join.next
-            missing = [n for n, lag in self.join.waits.items() if n in self.expected(self.t)
-                       and k - lag not in self.join.markers[n]] + ([MONITOR] if self.monitor_behind(k) else [])
-            self.stuck(now - self.progress, f"no tick from {', '.join(missing) or 'the graph'}")
+            if self.heard is None:
+                self.probe()
+                self.probing = now
+            if self.heard and self.probing is not None and now - self.probing < STUCK_PROBE:
+                return
+            self.stuck(now - self.progress, f"no tick from {', '.join(self.missing()) or 'the graph'}")
+
+    def probe(self) -> None:
+        """Lockstep, the graph stuck: listen to the markers of the nodes the simulator does not read, so that
+        :meth:`missing` can name every node that did not report the tick, not only the last ones."""
+        assert self.join is not None
+        heard: dict[str, int] = {}
+        self.heard = heard
+
+        def on_marker(msg: Any) -> None:
+            heard[msg.node] = max(heard.get(msg.node, -1), tick_of(marker_time(msg), self.dt))
+
+        for node in self.nodes:
+            if node != ROOT and node not in self.join.waits:
+                heard[node] = -1
+                self.rt.subscription(TICK_TYPE, marker_topic(node), on_marker, QOS_MARKER)
+
+    def missing(self) -> list[str]:
+        """Lockstep: the expected nodes that have not reported the tick the simulator waits for (those it does not read
+        as far as :meth:`probe` heard them), and the launcher's monitor when it is too far behind."""
+        assert self.join is not None
+        k, expected, heard = self.join.next, self.expected(self.t), self.heard or {}
+        late = {n for n, lag in self.join.waits.items() if n in expected and k - lag not in self.join.markers[n]}
+        late |= {n for n, tick in heard.items() if n in expected and tick < k}
+        return [n for n in self.nodes if n in late] + ([MONITOR] if self.monitor_behind(k) else [])
 
     def bus_arrived(self) -> None:
         """Lockstep on the CAN bus: frames wait on the bus (:meth:`moose_ros.runtime.base.NodeBase.watch`)."""
