@@ -12,8 +12,12 @@ FULL = GRAPHS["full"]
 def test_each_node_waits_for_the_root_its_upstream_and_the_feedback_one_tick_late() -> None:
     assert waits("observer", FULL) == {ROOT: 0}
     assert waits("motion_controller", FULL) == {ROOT: 0, "observer": 0, "weight_fbl": 0}
-    assert waits("mpc_planner", FULL) == {"weight_fbl": 1, ROOT: 0, "observer": 0, "obstacle_detector": 0}
+    # the planners and weight_fbl read nothing of the simulator: its marker's list of the nodes waited for comes
+    # from the fault plan (expected_at), one datagram less per tick each
+    assert waits("mpc_planner", FULL) == {"weight_fbl": 1, "observer": 0, "obstacle_detector": 0}
     assert waits("msf_planner", FULL) == waits("mpc_planner", FULL)  # both hear the blends in flight
+    assert waits("weight_fbl", FULL) == {"observer": 0, "obstacle_detector": 0, "mpc_planner": 0, "msf_planner": 0}
+    assert waits("mpc_planner", (ROOT, "mpc_planner")) == {ROOT: 0}  # the bag player announces what it plays
     assert waits(ROOT, FULL) == {n: 0 for n in FULL if n != ROOT}  # the bag player: every node it drives
     assert waits(ROOT, FULL, ()) == {"motion_controller": 0}  # the simulator without faults: the commands' marker
     can = GRAPHS["can"]  # the bridge makes the sensor topics and forwards the commands: it handles a tick last
@@ -23,7 +27,8 @@ def test_each_node_waits_for_the_root_its_upstream_and_the_feedback_one_tick_lat
     assert waits(ROOT, can, ()) == {"can_bridge": 0}  # the simulator steps with the command frames of the tick
     assert listeners("weight_fbl", FULL) == 3  # the planners (its blend), the motion controller
     assert listeners("motion_controller", FULL) == 1  # the simulator (its commands)
-    assert listeners(ROOT, FULL) == len(FULL) - 1
+    assert listeners(ROOT, FULL) == 3  # the observer, the detector, the motion controller: they read its messages
+    assert listeners(ROOT, GRAPHS["can"]) == 4  # and the bridge, its frames
 
 
 def test_the_simulator_reads_the_markers_that_imply_every_other_one() -> None:
@@ -56,10 +61,10 @@ def test_the_simulator_reads_the_markers_that_imply_every_other_one() -> None:
     assert root_reads(GRAPHS["can"], ["can_bridge"]) == {"motion_controller", "can_bridge"}
 
 
-def join(node: str) -> TickJoin:
+def join(node: str, faults: tuple[Fault, ...] = ()) -> TickJoin:
     from moose_ros.lockstep import data_topics
 
-    return TickJoin(node, FULL, [t.name for t in data_topics(node)])
+    return TickJoin(node, FULL, [t.name for t in data_topics(node)], faults=faults, period=0.01)
 
 
 def test_a_tick_is_handed_over_only_complete_and_in_publication_order() -> None:
@@ -81,10 +86,8 @@ def test_a_tick_is_handed_over_only_complete_and_in_publication_order() -> None:
 
 
 def test_feedback_of_the_previous_tick_comes_first_and_a_faulted_node_is_not_waited_for() -> None:
-    j = join("mpc_planner")
-    everyone = tuple(FULL)
+    j = join("mpc_planner", (Fault("weight_fbl", "kill", 0.01),))  # weight_fbl killed at tick 1
     for k in (0, 1):
-        j.marker(ROOT, k, (), everyone if k == 0 else tuple(n for n in everyone if n != "weight_fbl"))
         j.marker("observer", k, ("/perception/state",), None)
         j.message("/perception/state", f"state{k}")
         j.marker("obstacle_detector", k, ("/perception/threat",), None)
@@ -96,7 +99,6 @@ def test_feedback_of_the_previous_tick_comes_first_and_a_faulted_node_is_not_wai
     assert j.take() == (1, [("/planning/blend", "blend0"), ("/perception/state", "state1"),
                             ("/perception/threat", "threat1")])
     # from tick 1 on weight_fbl is out of the plan (a fault): it ran no tick 1, so tick 2 needs no marker of it
-    j.marker(ROOT, 2, (), tuple(n for n in everyone if n != "weight_fbl"))
     j.marker("observer", 2, (), None)
     j.marker("obstacle_detector", 2, (), None)
     assert j.take() == (2, [])
@@ -105,9 +107,8 @@ def test_feedback_of_the_previous_tick_comes_first_and_a_faulted_node_is_not_wai
 def stalled_planner(ticks: int) -> TickJoin:
     """The MPC planner's join, left out of ticks 1 … ``ticks`` (a stall), with one estimate and one threat announced
     and sent per tick 0 … ``ticks`` + 1 and the blend of tick 0."""
-    j = join("mpc_planner")
+    j = join("mpc_planner", (Fault("mpc_planner", "stall", 0.01, 0.01 * ticks),))
     for k in range(ticks + 2):
-        j.marker(ROOT, k, (), FULL if k == 0 or k > ticks else tuple(n for n in FULL if n != "mpc_planner"))
         for node, topic in (("observer", "/perception/state"), ("obstacle_detector", "/perception/threat")):
             j.marker(node, k, (topic,), None)
             j.message(topic, f"{topic.rsplit('/', 1)[1]}{k}")

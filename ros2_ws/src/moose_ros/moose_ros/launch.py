@@ -113,8 +113,8 @@ def node_overrides(graph: str, planner: str, params: Optional[dict[str, Any]] = 
     would refuse (the file's values included), so a bad configuration stops the launch before a node runs.
     The planner node that ``planner`` does not use is left out (:data:`moose.planner.MODE_PLANNERS`: a baseline runs
     in ``msf_planner``, without ``mpc_planner``).  ``lockstep``: every node gets the graph's nodes
-    (``lockstep_nodes``, :mod:`moose_ros.lockstep`) and runs on the ticks, not on a clock; the simulator gets the
-    ``faults`` (its fault plan).
+    (``lockstep_nodes``, :mod:`moose_ros.lockstep`) and runs on the ticks, not on a clock, and the ``faults`` (the
+    fault plan: which nodes the graph waits for at each tick).
     """
     if params_file:
         check_parameter_file(params_file, GRAPHS[graph], graph)
@@ -152,8 +152,8 @@ def node_overrides(graph: str, planner: str, params: Optional[dict[str, Any]] = 
         overrides["use_sim_time"] = simulated and name != "vehicle_simulator" and not lockstep
         if name == "vehicle_simulator":
             overrides["wait_for"] = [n for n in nodes if n != name]
-            if lockstep and faults:
-                overrides["faults"] = [str(f) for f in faults]
+        if lockstep and faults:  # the simulator's marker names who is waited for; a node that does not read it
+            overrides["faults"] = [str(f) for f in faults]  # works it out from the plan (moose_ros.lockstep)
         merged = _file_params(params_file, name)
         for key, value in overrides.items():
             set_dotted(merged, key, value)

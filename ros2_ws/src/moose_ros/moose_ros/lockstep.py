@@ -13,13 +13,15 @@ t + d).
   (:class:`moose.timing.CommandHold`).  It reads the markers of the nodes that imply all others
   (:func:`root_reads`: the last nodes of the tick for each set its fault plan can leave out, and the commands'
   publisher), not all of them: each marker is a datagram per reader.
-* Every other node handles tick k when the root marker k and the markers of its upstream nodes
-  (:func:`waits`: the publishers of its inputs; of tick k for those before it in :data:`PIPELINE`, of tick
-  k − 1 for the feedback from those after it, the blend the MPC warm-starts from, the commands the simulator
-  applies) have arrived, with every message they announce.  It then hands those messages to its callbacks in a
-  fixed order (feedback first, then each upstream node in pipeline order, each in its publication order), runs
-  its tick (the planning instants due, the estimate, the reference, the command), supervises its inputs on the
-  tick's simulated time, and publishes its marker.
+* Every other node handles tick k when the markers of its upstream nodes (:func:`waits`: the publishers of its
+  inputs; of tick k for those before it in :data:`PIPELINE`, of tick k − 1 for the feedback from those after it,
+  the blend the MPC warm-starts from, the commands the simulator applies) have arrived, with every message they
+  announce: the root's marker k where it reads what the root publishes (:func:`reads_root`); a node that does not
+  (the planners, ``weight_fbl``) knows from the fault plan which nodes the graph waits for at k
+  (:func:`expected_at`, the ``faults`` every lockstep node is given), as the root's marker says it.  It then hands
+  those messages to its callbacks in a fixed order (feedback first, then each upstream node in pipeline order, each
+  in its publication order), runs its tick (the planning instants due, the estimate, the reference, the command),
+  supervises its inputs on the tick's simulated time, and publishes its marker.
 * The delays are the timing model's, where the car has them: the sensor delay in the simulator
   (:class:`moose.timing.DelayLine`), the planning delay in ``weight_fbl``'s planning step, the command delay in
   the simulator (or the ECU emulator); no delay is left to the scheduler.
@@ -111,16 +113,26 @@ def data_topics(node: str) -> list[Topic]:
     return [t for t in subscribes(node) if t is not CLOCK and t is not DIAGNOSTICS]
 
 
+def reads_root(node: str, nodes: Collection[str]) -> bool:
+    """Whether ``node`` waits for the root's marker: it reads what the root publishes (the samples, the obstacle;
+    the bus's frames), or an input no other node of ``nodes`` publishes (the bag player, as the root, announces what
+    it plays).  One datagram less per tick for each node that does not."""
+    if node in BUS_PARTIES:
+        return True
+    return any(ROOT in t.publishers or not [p for p in t.publishers if p in nodes and p != ROOT]
+               for t in data_topics(node))
+
+
 def waits(node: str, nodes: Collection[str], faulted: Optional[Collection[str]] = None) -> dict[str, int]:
     """Whose markers ``node`` waits for before it handles tick k, and the lag of each (the marker of tick k − lag),
-    in the order their messages are handed over: feedback (lag 1) first, then pipeline order.  Every node but the
-    root waits for the root's tick k.  The root steps past k once the nodes of :func:`root_reads` (``faulted``: the
-    nodes of its fault plan) have reported k; with ``faulted`` ``None`` (the bag player), once every node has."""
+    in the order their messages are handed over: feedback (lag 1) first, then pipeline order.  A node waits for the
+    root's tick k where :func:`reads_root`.  The root steps past k once the nodes of :func:`root_reads` (``faulted``:
+    the nodes of its fault plan) have reported k; with ``faulted`` ``None`` (the bag player), once every node has."""
     if node == ROOT:
         chosen = root_reads(nodes, faulted) if faulted is not None else set(nodes)
         return {n: 0 for n in PIPELINE if n in nodes and n in chosen and n != ROOT}
     position = PIPELINE.index(node)
-    out: dict[str, int] = {ROOT: 0}
+    out: dict[str, int] = {ROOT: 0} if reads_root(node, nodes) else {}
     for topic in data_topics(node):
         for publisher in topic.publishers:
             if publisher in nodes and publisher != node:
@@ -171,6 +183,12 @@ def tick_of(t: float, period: float) -> int:
     return int(round(t / period))
 
 
+def expected_at(nodes: Collection[str], faults: Collection[Any], k: int, period: float) -> frozenset[str]:
+    """The nodes the graph waits for at tick ``k`` under the fault plan ``faults`` (:func:`left_out`): what the
+    root's marker k says, and what a node that does not read it (:func:`reads_root`) works out itself."""
+    return frozenset(n for n in nodes if not any(left_out(f, k, period) for f in faults if f.node == n))
+
+
 def left_out(fault: Any, k: int, period: float) -> bool:
     """Whether the graph does without ``fault``'s node (a :class:`moose_ros.faults.Fault`) at tick ``k``: a killed
     node from the fault's tick on, a stalled one from it until the tick its stall ends (exclusive: it runs that tick
@@ -183,13 +201,20 @@ def left_out(fault: Any, k: int, period: float) -> bool:
 class TickJoin:
     """Which tick a lockstep node may handle next, and the messages it hands over for it (see the module
     docstring).  Pure bookkeeping, no middleware: the node feeds it every input message (:meth:`message`) and
-    every marker (:meth:`marker`) as they arrive, and :meth:`take` returns the next complete tick.  ``faulted``
-    (the root only): the nodes of the simulator's fault plan, which say whose markers it reads (:func:`waits`)."""
+    every marker (:meth:`marker`) as they arrive, and :meth:`take` returns the next complete tick.  ``faults``:
+    the fault plan (:class:`moose_ros.faults.Fault`) and ``period`` the tick's: the root's say whose markers it reads
+    (:func:`waits`; ``None``: every node's, the bag player), and a node that does not read the root's marker knows
+    from them which nodes the graph waits for at each tick (:func:`expected_at`)."""
 
     def __init__(self, node: str, nodes: Collection[str], topics: Collection[str] = (),
-                 faulted: Optional[Collection[str]] = None) -> None:
+                 faults: Optional[Collection[Any]] = None, period: float = 0.0) -> None:
         self.node = node
-        self.waits = waits(node, nodes, faulted)
+        self.waits = waits(node, nodes, None if faults is None else [f.node for f in faults])
+        self.nodes = tuple(nodes)
+        self.faults = tuple(faults or ())
+        self.period = period
+        self.planned = node != ROOT and ROOT not in self.waits
+        """No root marker: the nodes expected at each tick come from the fault plan."""
         self.publishes: dict[str, list[str]] = {}
         """Upstream node → the topics of it this node reads."""
         self.queues: dict[str, deque[Any]] = {}
@@ -251,7 +276,7 @@ class TickJoin:
         topic (older ones are lost, as from a full reader queue), then the tick's own messages."""
         while True:
             k = self.next
-            expected = self.expected.get(k)
+            expected = self._expected(k)
             if expected is None:
                 return None
             order = self._announced(k, expected)
@@ -287,13 +312,19 @@ class TickJoin:
         order: list[str] = []
         for node, lag in self.waits.items():
             tick = k - lag
-            if tick < 0 or (node != ROOT and node not in self.expected.get(tick, expected)):
+            if tick < 0 or (node != ROOT and node not in (self._expected(tick) or expected)):
                 continue
             topics = self.markers[node].get(tick)
             if topics is None:
                 return None
             order.extend(topic for topic in topics if topic in self.queues)
         return order
+
+    def _expected(self, k: int) -> Optional[frozenset[str]]:
+        """The nodes the graph waits for at tick ``k``: from the plan, or the root's marker (``None``: not in yet)."""
+        if self.planned:
+            return expected_at(self.nodes, self.faults, k, self.period)
+        return self.expected.get(k)
 
     def _done(self, k: int) -> None:
         """Tick ``k`` is handled (or passed by, stopped): forget its markers; the next is k + 1."""

@@ -42,6 +42,9 @@ class NodeParams:
     lockstep_nodes: tuple[str, ...] = ()
     """The nodes of the graph when it runs in lockstep (``moose launch --lockstep``, :mod:`moose_ros.lockstep`);
     empty: real time."""
+    faults: tuple[str, ...] = ()
+    """Lockstep: the faults of the run (``NODE:kill@T``, ``NODE:stall@T:D``; ``moose launch --lockstep --fault``):
+    from T on the graph no longer waits for NODE (:func:`moose_ros.lockstep.expected_at`)."""
     monitored: bool = False
     """A launcher's monitor reads the graph (:data:`moose_ros.lockstep.MONITORED`): the node's publishers of those
     topics wait for it as for the graph's readers (in lockstep every node's; in real time the simulator's, before
@@ -120,9 +123,6 @@ class SimulatorParams(ScenarioParams, CanBusParams):
     lockstep_timeout: float = _checked(STUCK_TIMEOUT, positive, "a positive time (s)")
     """Lockstep: wall-clock seconds the simulator waits for one tick (or, at the start, for the graph to connect)
     before it ends the run with ``lockstep_stuck``."""
-    faults: tuple[str, ...] = ()
-    """Lockstep: the faults of the run (``NODE:kill@T``, ``NODE:stall@T:D``): from T on the graph no longer waits
-    for NODE (``moose launch --lockstep --fault``)."""
     ecu_minimum_risk: bool = True
     """``can`` bus: the emulated vehicle ECUs run the minimum-risk maneuver themselves when the commands stop
     (level 2 of :class:`moose.canbus.ecu.VehicleEcu`'s timeout, a requirement on the car's ECUs); ``false``

@@ -161,10 +161,10 @@ class GraphNode:
         self._pubs: list[tuple[Publisher, int]] = []
         nodes = tuple(getattr(self.params, "lockstep_nodes", ()))
         if nodes:  # lockstep (moose_ros.lockstep): supervision runs in each tick, not on a timer
-            # the inputs it reads join as the node subscribes; the simulator's fault plan says whose markers it reads
-            plan = getattr(self.params, "faults", None)
-            faulted = None if plan is None else [Fault.parse(text).node for text in plan]
-            self.join = TickJoin(self.name, nodes, faulted=faulted)
+            # the inputs it reads join as the node subscribes; the fault plan says whose markers the simulator reads,
+            # and which nodes the graph waits for at each tick to a node that does not read the simulator's marker
+            plan = [Fault.parse(text) for text in self.params.faults]
+            self.join = TickJoin(self.name, nodes, faults=plan, period=self.tick_period)
             self._marker = rt.publisher(TICK_TYPE, marker_topic(self.name), QOS_MARKER)
             self._pubs.append((self._marker, listeners(self.name, nodes)))
             for upstream in self.join.waits:
