@@ -405,6 +405,26 @@ waited for (not reproduced; Cyclone DDS 11's matching code sets a new reliable r
 to the writer's, so the cause is not known): now a reader that never acknowledges before it stops cannot pass."""
 
 
+def all_threads_stopped(pid: int, timeout: float) -> bool:
+    """Wait until every thread of process ``pid`` is stopped (state ``T`` in ``/proc/PID/task/*/stat``): ``kill()``
+    returns once SIGSTOP is queued, and each thread stops when the kernel next handles it.  The wait said True for a
+    stopped reader twice (ci23 alone, ci28b beside a second suite; not reproduced, 0 of 6 alone): waiting for the
+    stop removes one race that could explain it, a reader thread that ran a moment after ``kill()``; whether it was
+    the cause is not shown."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        states = []
+        for task in Path(f"/proc/{pid}/task").iterdir():
+            try:
+                states.append((task / "stat").read_text().rsplit(")", 1)[1].split()[0])
+            except (FileNotFoundError, IndexError):
+                continue
+        if states and all(state == "T" for state in states):
+            return True
+        time.sleep(0.005)
+    return False
+
+
 def test_wait_acknowledged_says_whether_every_reader_acknowledged() -> None:
     """A live reader acknowledges what was published (True at once); a reader in a stopped process never does: the
     wait ends at its timeout with False (Cyclone's Python binding raises an AttributeError of its own then)."""
@@ -424,7 +444,8 @@ def test_wait_acknowledged_says_whether_every_reader_acknowledged() -> None:
         assert spin_until(talker, lambda: pub.subscription_count() == 2, 30)
         pub(talker.make(WHEELS, omega_rl=2.0))
         assert pub.wait_acknowledged(30.0)  # both readers have answered: each is waited for from now on
-        os.kill(stopped.pid, signal.SIGSTOP)  # from now on it acknowledges nothing
+        os.kill(stopped.pid, signal.SIGSTOP)  # from now on it acknowledges nothing, once every thread has stopped:
+        assert all_threads_stopped(stopped.pid, 10.0)  # a thread running when kill() returns stops a moment later
         pub(talker.make(WHEELS, omega_rl=3.0))
         started = time.monotonic()
         assert pub.wait_acknowledged(0.5) is False
