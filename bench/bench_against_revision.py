@@ -19,7 +19,7 @@ import tarfile
 import tempfile
 import time
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 from bench_closed_loop import (  # the same case (this folder is on sys.path when run as a script)
     DURATION,
@@ -30,15 +30,20 @@ from bench_closed_loop import (  # the same case (this folder is on sys.path whe
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def load_revision(rev: str, folder: Path) -> str:
-    """Extract ``src/moose`` of ``rev`` into ``folder``/moose_base; returns the package name."""
-    archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev, "src/moose"], check=True,
+def extract_revision(rev: str, paths: Sequence[str], folder: Path) -> None:
+    """Extract ``paths`` of ``rev`` (``git archive``) into ``folder``, keeping their place in the tree."""
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev, *paths], check=True,
                              capture_output=True).stdout
     with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
         if hasattr(tarfile, "data_filter"):  # Python ≥ 3.10.12: refuse links and paths out of the folder
             tar.extractall(folder, filter="data")
         else:
             tar.extractall(folder)  # our own repository's archive
+
+
+def load_revision(rev: str, folder: Path) -> str:
+    """Extract ``src/moose`` of ``rev`` into ``folder``/moose_base; returns the package name."""
+    extract_revision(rev, ["src/moose"], folder)
     package = folder / "moose_base"
     (folder / "src" / "moose").rename(package)
     for path in package.rglob("*.py"):  # absolute imports of the package itself, and its data folder

@@ -13,18 +13,18 @@ Run: ``python bench/bench_graph_against_revision.py REV [--runs 5] [--duration 7
 from __future__ import annotations
 
 import argparse
-import io
 import json
 import os
 import resource
 import statistics
 import subprocess
 import sys
-import tarfile
 import tempfile
 import time
 from pathlib import Path
 from typing import Any, Optional
+
+from bench_against_revision import extract_revision  # this folder is on sys.path when run as a script
 
 REPO = Path(__file__).resolve().parents[1]
 SCENARIO = "paper_v6_w2.0"
@@ -34,13 +34,7 @@ SOURCES = ("src/moose", "ros2_ws/src/moose_ros/moose_ros", "ros2_ws/src/moose_ms
 
 def extract(rev: str, folder: Path) -> dict[str, str]:
     """``REV``'s packages in ``folder``; the environment that imports them first (and reads its messages)."""
-    archive = subprocess.run(["git", "-C", str(REPO), "archive", rev, *SOURCES], check=True,
-                             capture_output=True).stdout
-    with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
-        if hasattr(tarfile, "data_filter"):  # Python ≥ 3.10.12: refuse links and paths out of the folder
-            tar.extractall(folder, filter="data")
-        else:
-            tar.extractall(folder)  # our own repository's archive
+    extract_revision(rev, SOURCES, folder)
     return {"PYTHONPATH": os.pathsep.join(str(folder / p) for p in ("src", "ros2_ws/src/moose_ros")),
             "MOOSE_MSG_DIR": str(folder / "ros2_ws/src/moose_msgs/msg")}
 
