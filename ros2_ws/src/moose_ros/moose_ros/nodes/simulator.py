@@ -101,9 +101,11 @@ from ..lockstep import (
 from ..runtime.base import NodeBase
 from .base import ERROR, WARN, GraphNode, sensor_publishers
 
-STUCK_PROBE = 1.0
-"""Lockstep: wall-clock seconds the simulator of a stuck graph listens to the markers it does not read (transient
-local: it gets each node's last ticks) before it names every node that did not report the tick."""
+STUCK_PROBE = 5.0
+"""Lockstep: wall-clock seconds at most that the simulator of a stuck graph listens to the markers it does not read
+(transient local: it gets each node's last ticks) before it names every node that did not report the tick; it names
+them at once when every one of those nodes is heard to have reported it (the name of a node that did then does not
+depend on how fast discovery matched the probe)."""
 FINAL_DELIVERY = 2.0
 """Seconds the simulator waits, at the end of its run, for its readers to acknowledge the last odometry and its
 ``finished`` status (:meth:`VehicleSimulator.go_away`)."""
@@ -391,19 +393,19 @@ class VehicleSimulator(GraphNode):
         if self.finished:
             return
         if now - self.progress > self.params.lockstep_timeout:
-            if self.heard is None:
-                self.probe()
-                self.probing = now
-            if self.heard and self.probing is not None and now - self.probing < STUCK_PROBE:
+            if self.probing is None:
+                self.probe(now)
+            assert self.join is not None and self.heard is not None and self.probing is not None
+            if now - self.probing < STUCK_PROBE and any(tick < self.join.next for tick in self.heard.values()):
                 return
             self.stuck(now - self.progress, f"no tick from {', '.join(self.missing()) or 'the graph'}")
 
-    def probe(self) -> None:
-        """Lockstep, the graph stuck: listen to the markers of the nodes the simulator does not read, so that
+    def probe(self, now: float) -> None:
+        """Lockstep, the graph stuck at ``now``: listen to the markers of the nodes the simulator does not read, so that
         :meth:`missing` can name every node that did not report the tick, not only the last ones."""
         assert self.join is not None
         heard: dict[str, int] = {}
-        self.heard = heard
+        self.heard, self.probing = heard, now
 
         def on_marker(msg: Any) -> None:
             heard[msg.node] = max(heard.get(msg.node, -1), tick_of(marker_time(msg), self.dt))
