@@ -104,8 +104,8 @@ from .base import ERROR, WARN, GraphNode, sensor_publishers
 STUCK_PROBE = 5.0
 """Lockstep: wall-clock seconds at most that the simulator of a stuck graph listens to the markers it does not read
 (transient local: it gets each node's last ticks) before it names every node that did not report the tick; it names
-them at once when every one of those nodes is heard to have reported it (the name of a node that did then does not
-depend on how fast discovery matched the probe)."""
+them at once when every one of those nodes that the tick expects is heard to have reported it (the name of a node
+that did then does not depend on how fast discovery matched the probe)."""
 FINAL_DELIVERY = 2.0
 """Seconds the simulator waits, at the end of its run, for its readers to acknowledge the last odometry and its
 ``finished`` status (:meth:`VehicleSimulator.go_away`)."""
@@ -395,8 +395,8 @@ class VehicleSimulator(GraphNode):
         if now - self.progress > self.params.lockstep_timeout:
             if self.probing is None:
                 self.probe(now)
-            assert self.join is not None and self.heard is not None and self.probing is not None
-            if now - self.probing < STUCK_PROBE and any(tick < self.join.next for tick in self.heard.values()):
+            assert self.probing is not None
+            if now - self.probing < STUCK_PROBE and self.unheard():
                 return
             self.stuck(now - self.progress, f"no tick from {', '.join(self.missing()) or 'the graph'}")
 
@@ -419,10 +419,17 @@ class VehicleSimulator(GraphNode):
         """Lockstep: the expected nodes that have not reported the tick the simulator waits for (those it does not read
         as far as :meth:`probe` heard them), and the launcher's monitor when it is too far behind."""
         assert self.join is not None
-        k, expected, heard = self.join.next, self.expected(self.t), self.heard or {}
+        k, expected = self.join.next, self.expected(self.t)
         late = {n for n, lag in self.join.waits.items() if n in expected and k - lag not in self.join.markers[n]}
-        late |= {n for n, tick in heard.items() if n in expected and tick < k}
+        late |= self.unheard()
         return [n for n in self.nodes if n in late] + ([MONITOR] if self.monitor_behind(k) else [])
+
+    def unheard(self) -> set[str]:
+        """Lockstep: the expected nodes of those :meth:`probe` listens to that it has not heard report the tick the
+        simulator waits for."""
+        assert self.join is not None
+        k, expected = self.join.next, self.expected(self.t)
+        return {n for n, tick in (self.heard or {}).items() if n in expected and tick < k}
 
     def bus_arrived(self) -> None:
         """Lockstep on the CAN bus: frames wait on the bus (:meth:`moose_ros.runtime.base.NodeBase.watch`)."""
