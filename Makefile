@@ -39,8 +39,8 @@ TEST_JOBS ?= 2
 # it has been seen, where the C tracer is called on every line run (the in-process tests of test_reproduce, test_msf
 # and test_mpc: 26 CPU-s without coverage, 72 under the C tracer, 40 under sysmon, on 3.12; the whole suite 488 s:
 # docs/testing.md, "Python 3.12"); on 3.11 the C tracer (coverage warns about a sysmon it cannot have, so it is not
-# asked for).  The project's venv decides,
-# read when the recipe runs (after the venv exists); COVERAGE_CORE=ctrace make test overrides it.
+# asked for).  The project's venv decides, read when the recipe runs (after the venv exists); COVERAGE_CORE=ctrace
+# make test overrides it.
 COVERAGE_CORE ?= $(shell $(BIN)/python -c 'import sys; print("sysmon" if sys.version_info >= (3, 12) else "ctrace")')
 COVERAGE = env -u PYTHONDONTWRITEBYTECODE COVERAGE_CORE=$(COVERAGE_CORE) MOOSE_COVERAGE_DIR=$(CURDIR)/.coverage-data \
 	$(BIN)/python -m coverage
