@@ -175,6 +175,27 @@ def test_a_stuck_graph_names_the_nodes_whose_markers_the_simulator_does_not_read
     assert f"lockstep stuck at t = 0.00 s: no tick from {late} for " in sim.problems["lockstep_stuck"][1]
 
 
+def test_the_stuck_probe_waits_only_for_the_nodes_the_tick_expects() -> None:
+    """A probed node the fault plan killed never reports again: the probe does not wait for it (and does not name
+    it); it waits for the expected probed nodes it has not heard report the tick, whom :meth:`missing` names."""
+    nodes = ["vehicle_simulator", "observer", "obstacle_detector", "weight_fbl"]
+    rt = DdsNode("vehicle_simulator", overrides={"scenario": "paper_v7_tau1.4", "wait_for": [], "use_sim_time": False,
+                                                  "lockstep_nodes": nodes, "faults": ["observer:kill@0"]})
+    try:
+        sim = VehicleSimulator(rt)
+        assert sim.join is not None and "observer" not in sim.join.waits
+        sim.probe(0.0)
+        assert sim.heard is not None and sim.heard.get("observer") == -1
+        probed = set(sim.heard) - {"observer"}
+        assert probed, sim.heard  # another probed node, expected at the tick
+        assert sim.unheard() == probed and set(sim.missing()) >= probed
+        for node in probed:
+            sim.heard[node] = sim.join.next
+        assert sim.unheard() == set() and "observer" not in sim.missing()
+    finally:
+        rt.shutdown()
+
+
 def test_a_lockstep_graph_that_never_connects_ends_with_lockstep_stuck() -> None:
     rt = DdsNode("vehicle_simulator", overrides={"scenario": "paper_v7_tau1.4", "wait_for": [], "use_sim_time": False,
                                                   "lockstep_nodes": ["vehicle_simulator", "observer"],
