@@ -321,9 +321,11 @@ class TickJoin:
         return order
 
     def _expected(self, k: int) -> Optional[frozenset[str]]:
-        """The nodes the graph waits for at tick ``k``: from the plan, or the root's marker (``None``: not in yet)."""
-        if self.planned:
-            return expected_at(self.nodes, self.faults, k, self.period)
+        """The nodes the graph waits for at tick ``k``: from the plan, or the root's marker (``None``: not in yet).
+        The plan's answer is kept with the markers' (:attr:`expected`, forgotten with them): :meth:`take` asks a few
+        times per message (a planner, ``weight_fbl``: about 25 times per tick), always the same of a tick."""
+        if self.planned and k not in self.expected:
+            self.expected[k] = expected_at(self.nodes, self.faults, k, self.period)
         return self.expected.get(k)
 
     def _done(self, k: int) -> None:
