@@ -111,7 +111,15 @@ CONFORMANCE = textwrap.dedent(r'''
         pubs["/rt_test/" + topic](talker.make(WHEELS, omega_rl=float(k)))
     time.sleep(0.3)
     listener.spin_once(0.2)
-    out["order"] = got
+    out["order"] = list(got)
+    got.clear()  # spin_some: what has arrived, in publication order, without waiting for more
+    for k, topic in enumerate("yyxxy"):
+        pubs["/rt_test/" + topic](talker.make(WHEELS, omega_rl=float(10 + k)))
+    time.sleep(0.3)
+    listener.spin_some()
+    out["some"] = list(got)
+    listener.spin_some()
+    out["some_again"] = list(got)
     burst = []
     listener.subscription(WHEELS, "/rt_test/burst", lambda m: burst.append(m.omega_rl), Qos(reliable=True, depth=5))
     pub = talker.publisher(WHEELS, "/rt_test/burst", Qos(reliable=True, depth=50))
@@ -267,6 +275,7 @@ def test_runtimes_behave_the_same(ros_env: dict[str, str], tmp_path: Path) -> No
     assert rclpy["ticks_first_second"] == pytest.approx([0.1 * k for k in range(1, 11)], abs=1e-9)
     assert rclpy["ticks_after_jump"] == pytest.approx([5.05, 5.1, 5.2], abs=1e-9)
     assert rclpy["order"] == [float(k) for k in range(9)]  # publication order across the two topics
+    assert rclpy["some"] == rclpy["some_again"] == [float(k) for k in range(10, 15)]
     assert rclpy["keep_last_5"] == [45.0, 46.0, 47.0, 48.0, 49.0]
     assert rclpy["latched"] == [7.0]
     assert rclpy["shutdown"] == [True, [1]]

@@ -15,7 +15,8 @@ API (both backends, see :class:`NodeBase`):
 - ``declare_parameter(name, default)``, ``get_parameter(name)``, ``param(name, default)``, ``parameters``
 - ``now()`` (s; simulated time when ``use_sim_time``), ``log_info/log_warn/log_error``
 - ``count_publishers(topic)``, ``count_subscribers(topic)`` (graph introspection), ``endpoints()`` (its own)
-- ``spin(until)``, ``spin_once(timeout)``, ``shutdown()``, ``make(type, **fields)``, ``serialize(msg)``
+- ``spin(until)``, ``spin_once(timeout)``, ``spin_some()`` (what has arrived, without waiting), ``shutdown()``,
+  ``make(type, **fields)``, ``serialize(msg)``
 
 Both executors are single-threaded and run the callbacks of the messages they take at once in
 publication order (source timestamps), then the timers that are due.

@@ -323,6 +323,12 @@ class NodeBase(abc.ABC):
         raise NotImplementedError
 
     @abc.abstractmethod
+    def spin_some(self) -> None:
+        """Run the callbacks of what has arrived and the timers that are due, without waiting (rclcpp's
+        ``spin_some``): a node that reads many topics and need not answer each message at once polls with it."""
+        raise NotImplementedError
+
+    @abc.abstractmethod
     def spin(self, until: Optional[Callable[[], bool]] = None) -> None:
         """Run callbacks and timers until :meth:`shutdown` or ``until()`` is true."""
         raise NotImplementedError

@@ -506,6 +506,10 @@ class DdsNode(NodeBase):
                 if remaining <= 0:
                     break
 
+    def spin_some(self) -> None:
+        with self._running():
+            self._execute(0.0)
+
     def spin(self, until: Optional[Callable[[], bool]] = None) -> None:
         """Run callbacks and timers until ``shutdown()`` or ``until()`` is true (checked at least every 0.1 s)."""
         with self._running():

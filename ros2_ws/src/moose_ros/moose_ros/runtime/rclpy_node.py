@@ -460,6 +460,16 @@ class RclpyNode(NodeBase):
             except ExternalShutdownException:
                 pass
 
+    def spin_some(self) -> None:
+        from rclpy.executors import ExternalShutdownException
+
+        with self._running():
+            try:
+                if not self._stop.is_set() and self._rclpy.ok():
+                    self._turn(0.0)
+            except ExternalShutdownException:
+                pass
+
     def spin(self, until: Optional[Callable[[], bool]] = None) -> None:
         """Run callbacks and timers until ``shutdown()``, the end of the rclpy context (Ctrl-C) or
         ``until()`` is true (checked at least every 0.1 s)."""
