@@ -83,6 +83,12 @@ STACK_DUMP_WAIT = 1.0
 before SIGKILL."""
 DOMAIN_CHECK = 1.0
 """Seconds the launcher listens for other nodes in its DDS domain before it starts any (:func:`check_domain`)."""
+LOCKSTEP_POLL = 0.02
+"""In lockstep, the launcher takes what its node received every this many seconds of wall-clock time
+(:meth:`Supervisor.listen`) rather than waking for each message: it reads every topic of the graph (the monitor and
+the recorder, about twenty messages a tick), and each wake-up cost more than taking the message (docs/graph.md,
+"Lockstep").  Nothing waits for it: the simulator keeps at most :data:`moose_ros.lockstep.MONITOR_LAG` ticks ahead
+of what the monitor has read, within the depth of its readers, and the monitor judges simulated time."""
 LOCKSTEP_MIN_RATE = 0.05
 """The slowest lockstep run the launcher waits for (simulated seconds per wall-clock second), beyond start-up."""
 FINISH_DRAIN = 5.0
@@ -351,7 +357,7 @@ class Supervisor:
         start = time.monotonic()
         limit = start + (duration if duration is not None else self.time_allowed())
         while not self.stop.is_set() and time.monotonic() < limit:
-            self.node.spin_once(0.05)
+            self.listen()
             t_sim = self.monitor.sim_time
             t_fault = t_sim if self.simulated else time.monotonic() - start
             if t_fault is not None:
@@ -369,6 +375,16 @@ class Supervisor:
                 self.cut_short = "the time limit of the run was reached"
         for _ in range(10):  # let the last messages arrive
             self.node.spin_once(0.02)
+
+    def listen(self) -> None:
+        """Run the node's callbacks for a while: in lockstep, :data:`LOCKSTEP_POLL` seconds, then what arrived in
+        them; in real time as each message arrives (the monitor's deadlines and the recorder's stamps are the wall
+        clock's), for 0.05 s."""
+        if self.spec.lockstep:
+            self.stop.wait(LOCKSTEP_POLL)
+            self.node.spin_some()
+        else:
+            self.node.spin_once(0.05)
 
     def start_nodes(self) -> None:
         """Every node as ``python -m moose_ros.nodes NAME`` with its parameters, its output streamed: forked by the
