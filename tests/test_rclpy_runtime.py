@@ -103,8 +103,9 @@ CONFORMANCE = textwrap.dedent(r'''
     # callbacks in publication order across topics, keep-last depth, a late joiner of a latched topic
     talker, listener = node("order_talker"), node("order_listener")
     got = []
-    for topic in ("/rt_test/x", "/rt_test/y"):
-        listener.subscription(WHEELS, topic, lambda m: got.append(m.omega_rl), Qos(reliable=True, depth=10))
+    for topic in ("/rt_test/x", "/rt_test/y"):  # y's messages need not wake the executor: in order all the same
+        listener.subscription(WHEELS, topic, lambda m: got.append(m.omega_rl), Qos(reliable=True, depth=10),
+                              wake=topic.endswith("x"))
     pubs = {t: talker.publisher(WHEELS, t, Qos(reliable=True, depth=10)) for t in ("/rt_test/x", "/rt_test/y")}
     spin_until(listener, lambda: all(p.subscription_count() > 0 for p in pubs.values()))
     for k, topic in enumerate("xxxyyyxxx"):
@@ -120,6 +121,10 @@ CONFORMANCE = textwrap.dedent(r'''
     out["some"] = list(got)
     listener.spin_some()
     out["some_again"] = list(got)
+    got.clear()  # a message only on a subscription that does not wake the executor still arrives (WAKE_POLL)
+    pubs["/rt_test/y"](talker.make(WHEELS, omega_rl=20.0))
+    spin_until(listener, lambda: bool(got))
+    out["asleep"] = list(got)
     burst = []
     listener.subscription(WHEELS, "/rt_test/burst", lambda m: burst.append(m.omega_rl), Qos(reliable=True, depth=5))
     pub = talker.publisher(WHEELS, "/rt_test/burst", Qos(reliable=True, depth=50))
@@ -276,6 +281,7 @@ def test_runtimes_behave_the_same(ros_env: dict[str, str], tmp_path: Path) -> No
     assert rclpy["ticks_after_jump"] == pytest.approx([5.05, 5.1, 5.2], abs=1e-9)
     assert rclpy["order"] == [float(k) for k in range(9)]  # publication order across the two topics
     assert rclpy["some"] == rclpy["some_again"] == [float(k) for k in range(10, 15)]
+    assert rclpy["asleep"] == [20.0]
     assert rclpy["keep_last_5"] == [45.0, 46.0, 47.0, 48.0, 49.0]
     assert rclpy["latched"] == [7.0]
     assert rclpy["shutdown"] == [True, [1]]

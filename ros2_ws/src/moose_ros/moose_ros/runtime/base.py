@@ -166,6 +166,11 @@ class _Watch:
                     return
 
 
+WAKE_POLL = 0.02
+"""Seconds at most before the executor takes what arrived on a subscription made with ``wake=False``: the bound on
+its delay when nothing else wakes the executor."""
+
+
 class NodeBase(abc.ABC):
     """Parameters, logging and the spin/shutdown life cycle shared by both backends."""
 
@@ -268,8 +273,12 @@ class NodeBase(abc.ABC):
 
     @abc.abstractmethod
     def subscription(self, type_name: str, topic: str, callback: Callable[[Any], None],
-                     qos: Qos = QOS_DEFAULT) -> Handle:
-        """``callback`` for each message of ``type_name`` on ``topic``, called from :meth:`spin`/:meth:`spin_once`."""
+                     qos: Qos = QOS_DEFAULT, wake: bool = True) -> Handle:
+        """``callback`` for each message of ``type_name`` on ``topic``, called from :meth:`spin`/:meth:`spin_once`.
+        ``wake=False``: a message on it need not wake the executor; it is taken with the next wake-up's (a message
+        on another subscription, a timer) or after :data:`WAKE_POLL` seconds at the latest, still in publication
+        order.  A lockstep node's data: the marker that announces them, sent after them, wakes it (rclpy's executor
+        waits on every subscription: there it wakes as any other)."""
         raise NotImplementedError
 
     @abc.abstractmethod

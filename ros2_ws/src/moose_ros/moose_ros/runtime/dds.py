@@ -48,7 +48,7 @@ from typing import Any, Callable, Optional
 
 from moose.params import ParamError
 
-from .base import Handle, NodeBase, Publisher, check_period
+from .base import WAKE_POLL, Handle, NodeBase, Publisher, check_period
 from .discovery import Discovery
 from .names import CLOCK_TOPIC, CLOCK_TYPE, dds_topic_name
 from .qos import QOS_CLOCK_READER, QOS_DEFAULT, QOS_LATCHED, Qos
@@ -178,6 +178,8 @@ class DdsNode(NodeBase):
         self._topics: dict[str, Any] = {}        # DDS topic name → Topic
         self._local: dict[str, tuple[str, list[tuple[str, Qos]]]] = {}  # DDS topic → (type, [(kind, qos)])
         self._readers: list[_Reader] = []
+        self._sleepers = 0
+        """Active subscriptions made with ``wake=False`` (not in the wait set)."""
         self._writers: list[Any] = []
         self._timers: list[_Timer] = []
         self._reported: set[tuple[str, str, str]] = set()
@@ -268,7 +270,7 @@ class DdsNode(NodeBase):
                          lambda timeout: acknowledged(writer, timeout))
 
     def subscription(self, type_name: str, topic: str, callback: Callable[[Any], None],
-                     qos: Qos = QOS_DEFAULT) -> Handle:
+                     qos: Qos = QOS_DEFAULT, wake: bool = True) -> Handle:
         from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState
         from cyclonedds.sub import DataReader
 
@@ -277,7 +279,10 @@ class DdsNode(NodeBase):
         condition = ReadCondition(reader, SampleState.Any | ViewState.Any | InstanceState.Any)
         entry = _Reader(reader, callback, cls, condition, qos.depth)
         self._readers.append(entry)
-        self._waitset.attach(condition)
+        if wake:
+            self._waitset.attach(condition)
+        else:  # taken at the next wake-up, WAKE_POLL s at the latest (_wait_time)
+            self._sleepers += 1
         self._track("subscription", full, type_name, qos)
         self._gids["reader"].append(gid(reader.guid))
         self._publish_graph(with_node=True)
@@ -285,7 +290,10 @@ class DdsNode(NodeBase):
         def cancel() -> None:  # stops the callbacks; the DDS reader stays until the node goes
             if entry.active:
                 entry.active = False
-                self._waitset.detach(condition)
+                if wake:
+                    self._waitset.detach(condition)
+                else:
+                    self._sleepers -= 1
 
         return Handle(cancel)
 
@@ -448,6 +456,8 @@ class DdsNode(NodeBase):
 
     # -- executor --------------------------------------------------------------------
     def _wait_time(self, limit: float) -> float:
+        if self._sleepers:
+            limit = min(limit, WAKE_POLL)
         if self.use_sim_time:
             return limit  # simulated-time timers fire when /clock arrives
         pending = [t.next for t in self._timers if not t.cancelled]

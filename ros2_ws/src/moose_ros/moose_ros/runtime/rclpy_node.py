@@ -288,7 +288,7 @@ class RclpyNode(NodeBase):
         return Publisher(full, type_name, publish, pub.get_subscription_count, acknowledged)
 
     def subscription(self, type_name: str, topic: str, callback: Callable[[Any], None],
-                     qos: Qos = QOS_DEFAULT) -> Handle:
+                     qos: Qos = QOS_DEFAULT, wake: bool = True) -> Handle:
         from rclpy.event_handler import SubscriptionEventCallbacks
 
         full = self.resolve(topic)
