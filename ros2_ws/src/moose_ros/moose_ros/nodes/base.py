@@ -260,8 +260,8 @@ class GraphNode:
             else:
                 self._arrived(name, handler, record)
 
-        if self.join is not None and name in self.join.topics:
-            return self.rt.subscription(topic.type, name, on_message, QOS_DATA)
+        if self.join is not None and name in self.join.topics:  # the marker announcing them wakes the node
+            return self.rt.subscription(topic.type, name, on_message, QOS_DATA, wake=False)
         return topic.subscription(self.rt, on_message)
 
     def _arrived(self, name: str, handler: Callable[[Any], None], record: Any) -> None:
