@@ -123,3 +123,14 @@ def load_yaml(text: str, where: str) -> Any:
         raise ParamError(f"{where}: {exc}") from None
     except yaml.YAMLError as exc:
         raise ParamError(f"{where} is not valid YAML: {exc}") from None
+
+
+_DUMPER: Any = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
+"""libyaml's emitter where PyYAML was built with it (its wheels are), else PyYAML's own: the same document,
+about four times faster (a 15 kB ``metadata.yaml``: 2.8 against 12.4 ms), the lines of a long string folded
+elsewhere."""
+
+
+def dump_yaml(data: Any, sort_keys: bool = False) -> str:
+    """``data`` as a YAML document of plain types (``yaml.safe_dump``'s), keys in their order unless ``sort_keys``."""
+    return yaml.dump(data, Dumper=_DUMPER, sort_keys=sort_keys)

@@ -25,9 +25,7 @@ import time
 from pathlib import Path
 from typing import IO, Any, Iterable, Optional
 
-import yaml
-
-from ..files import OutputError
+from ..files import OutputError, dump_yaml
 from ..params import ParamError
 from .spec import SweepSpec
 
@@ -145,7 +143,7 @@ class RunFolder:
         if old and old.get("code") != manifest["code"]:
             manifest["code_history"] = old.get("code_history", []) + [old.get("code")]
         self.write_manifest(manifest)
-        (self.path / CONFIG).write_text(yaml.safe_dump(config_as_ros_params(spec.config), sort_keys=False),
+        (self.path / CONFIG).write_text(dump_yaml(config_as_ros_params(spec.config)),
                                         encoding="utf-8")
         return manifest
 

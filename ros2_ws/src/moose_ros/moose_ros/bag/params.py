@@ -15,6 +15,7 @@ from typing import Any, Optional, cast, get_args
 
 import yaml
 
+from moose.files import dump_yaml
 from moose.schema import PlannerMode
 
 from .errors import BagError
@@ -42,8 +43,8 @@ class RunParameters:
         from moose.config import config_as_ros_params
 
         return {
-            "moose.config": yaml.safe_dump(config_as_ros_params(self.config), sort_keys=False),
-            "moose.scenario": yaml.safe_dump(dataclasses.asdict(self.scenario), sort_keys=False),
+            "moose.config": dump_yaml(config_as_ros_params(self.config)),
+            "moose.scenario": dump_yaml(dataclasses.asdict(self.scenario)),
             "moose.planner": self.planner,
             "moose.seed": str(self.seed),
         }

@@ -47,10 +47,11 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any, Callable, Optional
 
-import yaml
 from mcap.data_stream import RecordBuilder
 from mcap.records import Channel, DataEnd, Footer, Schema
 from mcap.writer import CompressionType, Writer
+
+from moose.files import dump_yaml
 
 from ..graph import TOPICS
 from ..interfaces import typestore
@@ -227,7 +228,7 @@ class BagWriter:
             msgdef, _ = self._store.generate_msgdef(type_name, ros_version=2)
             schema = self._schemas[type_name] = self._mcap.register_schema(type_name, "ros2msg", msgdef.encode())
             outside.append(Schema(id=schema, data=msgdef.encode(), encoding="ros2msg", name=type_name))
-        offered = yaml.safe_dump(_offered(topic), sort_keys=False) if topic in TOPICS else ""
+        offered = dump_yaml(_offered(topic)) if topic in TOPICS else ""
         metadata = {"offered_qos_profiles": offered}
         channel = self._mcap.register_channel(topic, "cdr", self._schemas[type_name], metadata)
         outside.append(Channel(id=channel, topic=topic, message_encoding="cdr", metadata=metadata,
@@ -323,7 +324,7 @@ class BagWriter:
         info = self.metadata(on_file=True)
         try:
             tmp = self.path / "metadata.yaml.tmp"
-            tmp.write_text(yaml.safe_dump({"rosbag2_bagfile_information": info}, sort_keys=True), encoding="utf-8")
+            tmp.write_text(dump_yaml({"rosbag2_bagfile_information": info}, sort_keys=True), encoding="utf-8")
             tmp.replace(self.path / "metadata.yaml")
         except OSError as exc:
             self._fail(exc)
@@ -366,7 +367,7 @@ class BagWriter:
         try:
             if not self.failed:
                 info = self.metadata()
-                self._mcap.add_metadata("rosbag2", {"serialized_metadata": yaml.safe_dump(info, sort_keys=True)})
+                self._mcap.add_metadata("rosbag2", {"serialized_metadata": dump_yaml(info, sort_keys=True)})
                 self._mcap.finish()
                 self._commit(b"", truncate=True)
                 self._sync()
