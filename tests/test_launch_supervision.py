@@ -399,6 +399,27 @@ def test_a_participant_deletion_that_never_returns_ends_the_node_after_its_limit
             and "the middleware's teardown did not end" not in out), out[-3000:]
 
 
+DOMAIN_DELETION_HANGS = '''
+import atexit, ctypes
+from cyclonedds.domain import Domain
+Domain.__del__ = lambda self: ctypes.CDLL(None).sleep(3600)  # in C, the interpreter's lock released
+atexit.register(lambda: print("the exit handlers ran", flush=True))
+'''
+"""Cyclone DDS's deletion of the node's domain, at the interpreter's teardown, hanging as it did in 1 of 30
+fault-matrix launches alone (the teardown watchdog ended the node 10 s later); and an exit handler, as coverage.py
+registers one to save its data."""
+
+
+def test_a_node_ends_without_the_interpreters_teardown_but_with_its_exit_handlers(tmp_path: Path) -> None:
+    """A node ends its process once its participant is gone (moose.exiting.end_process): the exit handlers run,
+    Cyclone DDS's deletion of the domain at the interpreter's teardown does not, and a hang there cannot hold the
+    node to the teardown watchdog's 10 s."""
+    status, out = observer_stopped_with(tmp_path, DOMAIN_DELETION_HANGS)
+    assert status == 0, out[-3000:]
+    assert "the exit handlers ran" in out, out[-3000:]
+    assert "the middleware's teardown did not end" not in out and "Timeout (" not in out, out[-3000:]
+
+
 @pytest.mark.parametrize("how", HANGS)
 def test_a_node_whose_middleware_teardown_hangs_exits_and_says_where(tmp_path: Path, how: str) -> None:
     """The node's work is done once it stops; a teardown that never returns (rclpy's destroy_node in Fast DDS,

@@ -16,8 +16,9 @@ import argparse
 import os
 import signal
 import sys
-from typing import Callable, NoReturn, Sequence
+from typing import Callable, Sequence
 
+from ..exiting import end_process
 from ..files import OutputError
 from ..params import ParamError
 from ..scenario import DEFAULT_SCENARIO
@@ -58,28 +59,12 @@ def _interrupted(exc: BaseException) -> bool:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command of ``argv`` (default: the command line); its exit status.  Run as the program (``argv``
-    None), an interrupted command ends its process at once (:func:`_end_interrupted`)."""
+    None), an interrupted command ends its process at once, without the interpreter's teardown
+    (:func:`moose.exiting.end_process`)."""
     status = _command(argv)
     if status == EXIT_INTERRUPTED and argv is None:
-        _end_interrupted(status)
+        end_process(status)  # the command's cleanup has run; a C extension interrupted mid-call may abort teardown
     return status
-
-
-def _end_interrupted(status: int) -> NoReturn:
-    """End the process of an interrupted command without Python's finalization.  The command's own cleanup has run
-    (its ``finally`` blocks: bags closed, workers and nodes stopped) and the exit handlers run here (``atexit``:
-    multiprocessing's, coverage.py's); what is skipped is the interpreter's teardown, where a C extension that a
-    Ctrl-C interrupted mid-call aborted the process ("Fatal Python error: PyThreadState_Get: … the GIL is
-    released", exit status -6 where 130 was due: 1 Ctrl-C of 60 in ``moose simulate`` under coverage, 2026-12-03)."""
-    import atexit
-
-    atexit._run_exitfuncs()
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except (OSError, ValueError):  # a closed pipe or stream: nothing more can be said
-            pass
-    os._exit(status)
 
 
 def _command(argv: Sequence[str] | None) -> int:

@@ -20,8 +20,9 @@ import os
 import signal
 import sys
 import threading
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, NoReturn, Sequence
 
+from moose.exiting import end_process
 from moose.params import ParamError
 
 from ..graph import NODES
@@ -167,13 +168,18 @@ def _parent_gone() -> None:
     os.kill(os.getpid(), signal.SIGTERM)
 
 
-def main(name: str, argv: Sequence[str]) -> None:
-    """Run node ``name`` as a program: exit status 0, or 2 with ``NAME: error: …`` for bad input."""
+def main(name: str, argv: Sequence[str]) -> NoReturn:
+    """Run node ``name`` as a program: exit status 0, or 2 with ``NAME: error: …`` for bad input.  The process ends
+    without the interpreter's teardown (:func:`moose.exiting.end_process`: the exit handlers run, coverage.py's
+    among them): the node has deleted its DDS participant (announced itself gone) and sent its last status, and what
+    the teardown would add is Cyclone DDS's deletion of the process's domain, which hung in about one launch of ten
+    until :data:`TEARDOWN_GRACE` ended the process (docs/testing.md)."""
     try:
-        sys.exit(run(name, argv))
+        status = run(name, argv)
     except ParamError as exc:
         print(f"{name}: error: {exc}", file=sys.stderr)
-        sys.exit(2)
+        status = 2
+    end_process(status)
 
 
 def __getattr__(attr: str) -> Callable[[], None]:
