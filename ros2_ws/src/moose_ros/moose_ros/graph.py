@@ -158,10 +158,9 @@ class Topic:
         base = self.subscription_qos if self.qos.transient_local else self.qos
         return Qos(reliable=self.qos.reliable, depth=max(base.depth, 100), transient_local=self.qos.transient_local)
 
-    def tool_subscription(self, rt: NodeBase, callback: Callable[[Any], None], qos: Optional[Qos] = None) -> Handle:
-        """A subscription of a tool (monitor, recorder) with :attr:`tool_qos`, or ``qos`` (in lockstep:
-        :func:`moose_ros.lockstep.tool_qos`)."""
-        return rt.subscription(self.type, self.name, callback, qos or self.tool_qos)
+    def tool_subscription(self, rt: NodeBase, callback: Callable[[Any], None]) -> Handle:
+        """A subscription of a tool (monitor, recorder) with :attr:`tool_qos`."""
+        return rt.subscription(self.type, self.name, callback, self.tool_qos)
 
 
 QOS_TF = Qos(reliable=True, depth=100)

@@ -311,14 +311,14 @@ class Supervisor:
         on ``foxglove``: all before any node starts; what was opened is closed again if one of them fails."""
         try:
             check_domain(self.node)
-            self.monitor.attach(self.node, self.spec.lockstep)
+            self.monitor.attach(self.node)
             spec = self.spec
             if spec.lockstep:  # the simulator keeps at most MONITOR_LAG ticks ahead of what the monitor has read
                 marker = self.node.publisher(TICK_TYPE, marker_topic(MONITOR), QOS_MARKER)
                 self.monitor.acknowledge = lambda t: marker(marker_message(self.node.make, MONITOR, t, []))
             if bag is not None:  # an unusable path stops here; the run's parameters are kept (moose bag replan)
                 self.recorder = Recorder(self.node, bag, parameters=RunParameters(
-                    self.monitor.config, spec.scenario, spec.planner, spec.seed), lockstep=spec.lockstep)
+                    self.monitor.config, spec.scenario, spec.planner, spec.seed))
             if foxglove is not None:
                 self.live = LiveView(self.node, host=foxglove[0], port=foxglove[1])
                 self.out.write(f"[launch] Foxglove live view on {self.live.url}\n")

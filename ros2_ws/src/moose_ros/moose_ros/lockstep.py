@@ -89,22 +89,6 @@ polling every millisecond cost the CAN graph's two bus parties CPU time for ever
 MONITORED: tuple[str, ...] = tuple(t.name for t in (ODOM, STEERING, PLAN_MPC, BLEND, THREAT, DIAGNOSTICS))
 """What the launcher's monitor reads (:meth:`moose_ros.monitor.Monitor.attach`): with ``monitored`` a lockstep
 publisher of these waits for its reader as for the graph's, so the summary misses nothing of tick 0."""
-
-
-def tool_qos(topic: Topic, lockstep: bool) -> Qos:
-    """What a tool of the launcher (its monitor, the recorder) requests of ``topic``: the tool's QoS
-    (:attr:`moose_ros.graph.Topic.tool_qos`); in lockstep, for the topics of :data:`MONITORED`, whose publishers
-    offer :data:`QOS_DATA` (or are latched), reliable and transient local as a lockstep node's reader: a writer
-    sees its reader matched before the reader has matched the writer, and a volatile reader that matches late
-    starts after what was already sent (ci45: the monitor of a lockstep graph with an rclpy simulator counted 900
-    of its 901 odometry samples; which one it missed was not recorded). The clock and the TF, published with
-    their own QoS in lockstep too, keep the tool's."""
-    qos = topic.tool_qos
-    if lockstep and topic.name in MONITORED:
-        return Qos(reliable=True, depth=max(qos.depth, DEPTH), transient_local=True)
-    return qos
-
-
 MONITOR = "moose_monitor"
 """The launcher's monitor node (:mod:`moose_ros.monitor`), a reader of the graph outside its pipeline."""
 MONITOR_LAG = DEPTH // 2

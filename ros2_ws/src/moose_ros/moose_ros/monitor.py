@@ -23,7 +23,7 @@ from moose.simulation import SimulationResult
 from . import convert as cv
 from .graph import BLEND, DIAGNOSTICS, ODOM, PLAN_MPC, STEERING, THREAT, TOPICS
 from .incidents import IncidentLog
-from .lockstep import MONITOR_ACK_EVERY, MONITORED, tick_of, tool_qos
+from .lockstep import MONITOR_ACK_EVERY, MONITORED, tick_of
 from .runtime.base import NodeBase
 
 
@@ -54,14 +54,12 @@ class Monitor:
     odometry read, and of the run's last (the monitor's marker: the simulator keeps at most
     :data:`~moose_ros.lockstep.MONITOR_LAG` ticks ahead of it)."""
 
-    def attach(self, node: NodeBase, lockstep: bool = False) -> None:
-        """Subscribe on ``node``, with a tool's QoS (:func:`moose_ros.lockstep.tool_qos`: it must not miss a sample,
-        in ``lockstep`` tick 0 included)."""
+    def attach(self, node: NodeBase) -> None:  # a tool that must not miss a sample (graph.Topic.tool_qos)
         callbacks = {ODOM.name: self.on_odom, STEERING.name: lambda m: setattr(self, "delta", m.delta),
                      PLAN_MPC.name: self.on_mpc, THREAT.name: self.on_threat, DIAGNOSTICS.name: self.on_diagnostics,
                      BLEND.name: lambda m: self.weights.__setitem__(cv.time_of(m), m.weight_mpc)}
         for name in MONITORED:  # a lockstep graph waits for these readers too (moose_ros.lockstep.MONITORED)
-            TOPICS[name].tool_subscription(node, callbacks[name], tool_qos(TOPICS[name], lockstep))
+            TOPICS[name].tool_subscription(node, callbacks[name])
 
     def on_odom(self, m: Any) -> None:
         p, q, v = m.pose.pose.position, m.pose.pose.orientation, m.twist.twist.linear

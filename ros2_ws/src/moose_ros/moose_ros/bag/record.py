@@ -21,7 +21,6 @@ from ..graph import (
     THREAT,
     TOPICS,
 )
-from ..lockstep import tool_qos
 from ..runtime.base import NodeBase
 from .errors import BagError
 from .params import RunParameters
@@ -37,15 +36,14 @@ class Recorder:
     it has been open :data:`~moose_ros.bag.writer.CHUNK_SPAN_S`, so a recorder killed with SIGKILL loses at most
     that much, and what it had not yet taken from its subscriptions (:mod:`moose_ros.bag.writer`).  A write
     that fails (a full disk) stops the recording, not the graph: :attr:`error` says why and what the bag
-    holds.  ``parameters``: the run's (:class:`~moose_ros.bag.params.RunParameters`), kept in the bag; ``lockstep``:
-    the graph runs in lockstep (:func:`moose_ros.lockstep.tool_qos`).
+    holds.  ``parameters``: the run's (:class:`~moose_ros.bag.params.RunParameters`), kept in the bag.
     """
 
     POLL_PERIOD = 0.05
     """Period of the timer that closes chunks (s, wall clock)."""
 
     def __init__(self, node: NodeBase, path: str | Path, topics: Optional[Sequence[str]] = None,
-                 parameters: Optional[RunParameters] = None, lockstep: bool = False) -> None:
+                 parameters: Optional[RunParameters] = None) -> None:
         chosen = list(topics) if topics else list(TOPICS)
         unknown = [t for t in chosen if t not in TOPICS]
         if unknown:
@@ -56,7 +54,7 @@ class Recorder:
         self._serialize = node.serialize  # the runtime's CDR: the same bytes on both runtimes
         self._last_ns = 0
         for topic in chosen:
-            TOPICS[topic].tool_subscription(node, self._callback(topic), tool_qos(TOPICS[topic], lockstep))
+            TOPICS[topic].tool_subscription(node, self._callback(topic))
         node.timer(self.POLL_PERIOD, lambda: self._guarded(self.writer.poll))
 
     def _guarded(self, action: Callable[[], None]) -> None:
