@@ -93,7 +93,7 @@ BUGS = (
     # consequence at the node that must detect it: this bug left every kill's old checks (minimum_risk, fallback,
     # ecu_timeout anywhere) passing
     Bug("stale-filed-as-warning", "the launcher files a node's stale input as a plain warning, not input_stale",
-        "ros2_ws/src/moose_ros/moose_ros/incidents.py",
+        f"{PKG}/incidents.py",
         (('_PROBLEM_KINDS = {"stale": "input_stale", "minimum_risk"', '_PROBLEM_KINDS = {"minimum_risk"'),),
         ("tests/test_fault_matrix.py::test_fault[full-obstacle_detector-kill]",)),
     # the rate check asked only for an achieved factor below the requested one: the inverse ratio (0.08 at --rate 25,
@@ -133,7 +133,7 @@ BUGS = (
         ("tests/test_cli_errors.py",)),
     # the compiled CDR of the DDS messages: every message of the graph goes through it
     Bug("cdr-xcdr2-alignment", "the compiled CDR aligns 8-byte fields to 4 (XCDR2's rule, not XCDR1's)",
-        "ros2_ws/src/moose_ros/moose_ros/cdr.py",
+        f"{PKG}/cdr.py",
         (("                align = min(_size(code), 8)\n", "                align = min(_size(code), 4)\n"),),
         ("tests/test_cdr.py",)),
 )

@@ -22,7 +22,7 @@ GIT_IGNORED = [line.strip().strip("/") for line in (ROOT / ".gitignore").read_te
 """What .gitignore keeps out of the repository, by name: the virtual environments (``.venv-ros`` is 1 GB), caches,
 and the coverage data the suite's other processes write and delete while the copy is made (ci42 failed copying a
 data file that was gone by then)."""
-SKIP = shutil.ignore_patterns(*GIT_IGNORED, ".git", "bags", "build", "dist", "tests", "bench", "docs")
+SKIP = shutil.ignore_patterns(*GIT_IGNORED, ".git", "bags", "dist", "tests", "bench", "docs")
 
 
 def run(cmd: list, cwd: Path, timeout: float = 600.0) -> subprocess.CompletedProcess:
