@@ -1,8 +1,9 @@
-"""Test-run isolation: a DDS domain of our own on loopback only, a private compile cache, and no process that
+"""Test-run isolation: a DDS domain of each test's own on loopback only, a private compile cache, and no process that
 outlives the run."""
 from __future__ import annotations
 
 import ast
+import contextlib
 import os
 import resource
 import subprocess
@@ -13,8 +14,8 @@ from typing import Any, Iterator, Optional
 
 import pytest
 
-from isolation import claim_domain, realtime_slot
-from ros2_prefix import dds_env, ros_env  # noqa: F401 - fixtures of the ROS 2 prefix tests
+from isolation import claim_domain, realtime_slot, release_domain
+from ros2_prefix import cyclone_localhost, dds_env, ros_env  # noqa: F401 - fixtures of the ROS 2 prefix tests
 
 SESSION_MARK = "MOOSE_TEST_SESSION"
 """Environment variable every process a test run starts inherits: the run's own mark."""
@@ -207,16 +208,50 @@ def realtime(request: pytest.FixtureRequest) -> Iterator[None]:
 
 @pytest.fixture(scope="session", autouse=True)
 def dds_loopback(tmp_path_factory: pytest.TempPathFactory) -> None:
-    """A ROS_DOMAIN_ID claimed for this test run (tests/isolation.py); Cyclone DDS bound to the loopback interface."""
+    """Cyclone DDS bound to the loopback interface, for every process of the test run."""
     config = tmp_path_factory.mktemp("dds") / "cyclonedds.xml"
     config.write_text(
         '<CycloneDDS><Domain Id="any"><General><Interfaces><NetworkInterface name="lo"/></Interfaces>'
         "<AllowMulticast>spdp</AllowMulticast></General></Domain></CycloneDDS>"
     )
-    os.environ["ROS_DOMAIN_ID"] = str(claim_domain())
     os.environ["CYCLONEDDS_URI"] = config.as_uri()
     os.environ["MOOSE_RUNTIME"] = "dds"
     os.environ.setdefault("MOOSE_CACHE_DIR", str(Path.home() / ".cache" / "moose"))
+
+
+@contextlib.contextmanager
+def own_domain() -> Iterator[int]:
+    """ROS_DOMAIN_ID set to a domain claimed for the block (tests/isolation.py), and released after it."""
+    before = os.environ.get("ROS_DOMAIN_ID")
+    domain = claim_domain()
+    os.environ["ROS_DOMAIN_ID"] = str(domain)
+    try:
+        yield domain
+    finally:
+        if before is None:
+            del os.environ["ROS_DOMAIN_ID"]
+        else:
+            os.environ["ROS_DOMAIN_ID"] = before
+        release_domain(domain)
+
+
+@pytest.fixture(scope="module", autouse=True)
+def dds_module_domain() -> Iterator[int]:
+    """A DDS domain of the test file's own, for what its module fixtures start (autouse: made before them)."""
+    with own_domain() as domain:
+        yield domain
+
+
+@pytest.fixture(autouse=True)
+def dds_domain(request: pytest.FixtureRequest, dds_module_domain: int) -> Iterator[int]:
+    """A DDS domain of the test's own: no participant of another test, earlier or at once, meets its processes
+    (a writer left behind by an earlier test is never matched by this one's readers).  A file marked
+    ``dds_module_domain`` keeps its file's domain for its tests: a module fixture's graph they all talk to."""
+    if request.node.get_closest_marker("dds_module_domain") is not None:
+        yield dds_module_domain
+        return
+    with own_domain() as domain:
+        yield domain
 
 
 @pytest.fixture(scope="session")

@@ -1,9 +1,12 @@
 """Resources a test run claims for itself: a DDS domain id and UDP ports that no other run on this machine uses.
 
 A DDS domain is claimed with an exclusive, non-blocking ``flock`` on a file under the system's
-temporary folder, held for the whole test session (the kernel releases it when the process dies,
+temporary folder, held until :func:`release_domain` (or until the process dies: the kernel releases it,
 even on SIGKILL), and only if Cyclone DDS's discovery port of that domain (7400 + 250 · id, the
-RTPS well-known port) can be bound on loopback, so a graph left over from another run is noticed.
+RTPS well-known port) can be bound on loopback, so a graph left over from another test or run is noticed.
+Each test has a domain of its own (tests/conftest.py): a process claims the domains in turn from where its
+last claim ended, so a domain it released is the last it takes again, and a writer an earlier test left
+behind is never matched by a later test's reader.
 UDP ports for the CAN bus are taken from the kernel (bind to port 0) and held by a lock file too,
 so two concurrent runs never share a bus.
 
@@ -28,12 +31,15 @@ LOCK_DIR = Path(tempfile.gettempdir()) / "moose-test-locks"
 DOMAIN_IDS = range(1, 200)
 """Cyclone DDS accepts 0..232; 0 is ROS 2's default and is left to users."""
 
-_held: list[IO[str]] = []
+_held: dict[str, IO[str]] = {}
+"""Lock file name → its open, locked handle."""
 
 
 def _lock(name: str) -> bool:
+    if name in _held:
+        return False  # flock is per open file: this process would lock it a second time
     LOCK_DIR.mkdir(parents=True, exist_ok=True)
-    handle = open(LOCK_DIR / name, "w", encoding="utf-8")  # noqa: SIM115 - held (with its lock) until exit
+    handle = open(LOCK_DIR / name, "w", encoding="utf-8")  # noqa: SIM115 - held (with its lock) until released
     try:
         fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
@@ -41,7 +47,7 @@ def _lock(name: str) -> bool:
         return False
     handle.write(str(os.getpid()))
     handle.flush()
-    _held.append(handle)
+    _held[name] = handle
     return True
 
 
@@ -55,14 +61,30 @@ def _udp_port_free(port: int) -> bool:
     return True
 
 
+_next_domain = os.getpid() % len(DOMAIN_IDS)
+"""Index in :data:`DOMAIN_IDS` where this process's next claim starts looking (after its last claim)."""
+
+
 def claim_domain() -> int:
-    """A DDS domain id locked for this process and with its discovery port free; raises if none is left."""
-    start = os.getpid() % len(DOMAIN_IDS)
+    """A DDS domain id locked for this process and with its discovery port free; raises if none is left.
+
+    The search starts after this process's last claim: the domains are taken in turn, and one just released is
+    taken again only after every other (a participant that outlived its test has had that long to end)."""
+    global _next_domain
     for i in range(len(DOMAIN_IDS)):
-        domain = DOMAIN_IDS[(start + i) % len(DOMAIN_IDS)]
+        index = (_next_domain + i) % len(DOMAIN_IDS)
+        domain = DOMAIN_IDS[index]
         if _udp_port_free(7400 + 250 * domain) and _lock(f"dds-domain-{domain}"):
+            _next_domain = index + 1
             return domain
     raise RuntimeError(f"no free DDS domain in {DOMAIN_IDS}: every one is locked by another test run")
+
+
+def release_domain(domain: int) -> None:
+    """Let go of a domain :func:`claim_domain` gave this process."""
+    handle = _held.pop(f"dds-domain-{domain}")
+    fcntl.flock(handle, fcntl.LOCK_UN)
+    handle.close()
 
 
 def claim_udp_port() -> int:

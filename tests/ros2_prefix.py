@@ -6,10 +6,11 @@ why, when the prefix has not been made; with ``MOOSE_REQUIRE_ROS=1`` (CI) that i
 a prefix built from other sources (a changed ``.msg`` file, other wheels): ``make ros`` brings it up
 to date.  Both vendors discover on this host only: rclpy by Jazzy's
 ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (rmw_fastrtps reads it), our Cyclone runtime by the
-configuration rmw_cyclonedds makes of it (``dds_env``), in the test run's own domain (conftest.py).
+configuration rmw_cyclonedds makes of it (``dds_env``), in the test's own domain (conftest.py).
 """
 from __future__ import annotations
 
+import functools
 import importlib.util
 import os
 from pathlib import Path
@@ -40,6 +41,7 @@ def _load_ros_prefix() -> Any:
 ros_prefix = _load_ros_prefix()
 
 
+@functools.lru_cache(maxsize=None)
 def prefix_problem(prefix: Path) -> tuple[str, str]:
     """('skip' | 'fail' | '', reason) for the prefix at ``prefix``."""
     if not (prefix / ros_prefix.ENV_FILE).is_file():
@@ -56,9 +58,10 @@ def prefix_problem(prefix: Path) -> tuple[str, str]:
     return "", ""
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def ros_env() -> dict[str, str]:
-    """The environment of an rclpy process: the prefix's variables, on this host only."""
+    """The environment of an rclpy process: the prefix's variables, on this host only, in the test's own domain
+    (made for each test: conftest.py's ``dds_domain`` claims a domain per test)."""
     prefix = ros_prefix.default_prefix()
     verdict, reason = prefix_problem(prefix)
     if verdict == "skip" and os.environ.get("MOOSE_REQUIRE_ROS") != "1":
@@ -68,9 +71,16 @@ def ros_env() -> dict[str, str]:
     return ros_prefix.environment(prefix, {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"})
 
 
-@pytest.fixture(scope="module")
-def dds_env(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
-    """The environment of a process on our Cyclone DDS runtime that is to meet rclpy on this host."""
+@pytest.fixture(scope="session")
+def cyclone_localhost(tmp_path_factory: pytest.TempPathFactory) -> str:
+    """The URI of a Cyclone DDS configuration file of :data:`CYCLONE_LOCALHOST`."""
     config = tmp_path_factory.mktemp("dds-localhost") / "cyclonedds.xml"
     config.write_text(CYCLONE_LOCALHOST)
-    return {**os.environ, "CYCLONEDDS_URI": config.as_uri(), "MOOSE_RUNTIME": "dds"}
+    return config.as_uri()
+
+
+@pytest.fixture
+def dds_env(cyclone_localhost: str) -> dict[str, str]:
+    """The environment of a process on our Cyclone DDS runtime that is to meet rclpy on this host, in the test's
+    own domain."""
+    return {**os.environ, "CYCLONEDDS_URI": cyclone_localhost, "MOOSE_RUNTIME": "dds"}

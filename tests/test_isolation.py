@@ -2,6 +2,7 @@
 
 * Two test runs at once claim different DDS domains and UDP ports (tests/isolation.py), also when a domain's
   discovery port is taken by a process that holds no lock (a graph left running by something else).
+* Each test has a domain of its own, locked while it runs; a domain released is not the next one claimed.
 * Two test runs at once, of tests that start graphs on DDS, use CAN buses on UDP and hold the real-time slot,
   both pass (the whole suite twice at once is run by hand: 2 × 30 min does not fit CI's budget).
 * The real-time slot is held by one process at a time: another waits for it, and fails after its wait.
@@ -61,6 +62,39 @@ def test_concurrent_runs_claim_different_domains_and_ports() -> None:
     again, procs = claims(1)  # released with the processes: free for the next run
     release(procs)
     assert again[0]["domain"] in DOMAIN_IDS
+
+
+ROTATE = textwrap.dedent("""
+    import json, sys
+    sys.path.insert(0, sys.argv[1])
+    from isolation import claim_domain, release_domain
+    first = claim_domain()
+    release_domain(first)
+    second = claim_domain()
+    print(json.dumps([first, second]))
+""")
+
+
+def test_a_released_domain_is_not_the_next_one_claimed() -> None:
+    # each test claims a domain and releases it after: the next test's domain is another one, so a participant the
+    # earlier test left behind (ending, or leaked) cannot meet the later test's
+    out = subprocess.run([sys.executable, "-c", ROTATE, str(TESTS)], capture_output=True, text=True, timeout=30,
+                         check=True)
+    first, second = json.loads(out.stdout)
+    assert first != second and {first, second} <= set(DOMAIN_IDS)
+
+
+SEEN_DOMAINS: list[int] = []
+
+
+@pytest.mark.parametrize("case", ["one", "other"])
+def test_each_test_has_a_domain_of_its_own(case: str, dds_domain: int, dds_module_domain: int) -> None:
+    assert os.environ["ROS_DOMAIN_ID"] == str(dds_domain) and dds_domain != dds_module_domain
+    assert dds_domain not in SEEN_DOMAINS, case  # the other case (before this one, in either order) had another
+    SEEN_DOMAINS.append(dds_domain)
+    held, procs = claims(2)  # locked while the test runs: another process is given other domains
+    release(procs)
+    assert dds_domain not in [h["domain"] for h in held]
 
 
 def test_a_domain_whose_discovery_port_is_in_use_is_skipped() -> None:

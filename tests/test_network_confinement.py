@@ -252,7 +252,7 @@ class Lines:
         raise AssertionError(f"no result; output:\n{''.join(self.lines)}")
 
 
-@pytest.fixture(scope="module", params=["dds", "rclpy"])
+@pytest.fixture(params=["dds", "rclpy"])
 def runtime(request: pytest.FixtureRequest) -> tuple[str, str, dict[str, str]]:
     """(runtime, interpreter, environment) of the bridge and of the publishers on that runtime: this interpreter
     for Cyclone DDS; the ROS 2 prefix of ``make ros`` for rclpy (skipped, saying why, when it is not made)."""

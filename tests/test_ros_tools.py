@@ -42,7 +42,7 @@ from moose_ros.graph import GRAPHS, TOPICS, publishes, subscribes
 from moose_ros.interfaces import type_hash, typestore
 
 # the graph is paced in real time (rate 0.5) and holds the real-time slot: in the serial phase of make test
-pytestmark = [pytest.mark.graph, pytest.mark.slow, pytest.mark.realtime]
+pytestmark = [pytest.mark.graph, pytest.mark.slow, pytest.mark.realtime, pytest.mark.dds_module_domain]
 
 REPO = Path(__file__).resolve().parents[1]
 NODES = [n for n in GRAPHS["full"]]  # the combined planner: both planners run
