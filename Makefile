@@ -35,6 +35,10 @@ lint: $(STAMP)
 # make test PYTEST_ARGS='-k can' (a phase that selects no test is skipped; both selecting none is an error).
 COVERAGE_FLOOR ?= 90
 TEST_JOBS ?= 2
+# The tests' temporary files, outside the checkout (a test of a fresh directory must not find the project's files above
+# it) and one folder per checkout, so two checkouts' runs at once never share one: a failing test's files (its bag,
+# its launch log) stay there until the next `make test` (pyproject.toml: tmp_path_retention_policy).
+TEST_TMP ?= $(or $(TMPDIR),/tmp)/moose-tests-$(shell printf %s '$(CURDIR)' | cksum | cut -d' ' -f1)
 # coverage.py's core: on Python 3.12 and newer its sys.monitoring core (`sysmon`), which stops reporting a line once
 # it has been seen, where the C tracer is called on every line run (the in-process tests of test_reproduce, test_msf
 # and test_mpc: 26 CPU-s without coverage, 72 under the C tracer, 40 under sysmon, on 3.12; the whole suite 488 s:
@@ -48,9 +52,10 @@ test: $(STAMP)
 	rm -rf .coverage-data runs/tests && mkdir -p .coverage-data runs/tests
 	$(BIN)/python -m compileall -q src ros2_ws/src tests bench > /dev/null
 	@a=0; b=0; \
-	$(COVERAGE) run -m pytest -n $(TEST_JOBS) --dist loadgroup -m 'not realtime' \
+	$(COVERAGE) run -m pytest -n $(TEST_JOBS) --dist loadgroup -m 'not realtime' --basetemp=$(TEST_TMP)/parallel \
 		--junitxml=runs/tests/parallel.xml $(PYTEST_ARGS) || a=$$?; \
-	$(COVERAGE) run -m pytest -m realtime --junitxml=runs/tests/realtime.xml $(PYTEST_ARGS) || b=$$?; \
+	$(COVERAGE) run -m pytest -m realtime --basetemp=$(TEST_TMP)/realtime --junitxml=runs/tests/realtime.xml \
+		$(PYTEST_ARGS) || b=$$?; \
 	if [ $$a -eq 5 ] && [ $$b -eq 5 ]; then echo "make test: no test selected"; exit 5; fi; \
 	if [ $$a -eq 5 ]; then a=0; fi; if [ $$b -eq 5 ]; then b=0; fi; \
 	exit $$(( a ? a : b ))

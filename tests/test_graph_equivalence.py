@@ -8,7 +8,6 @@ scenario (``moose simulate``): the same planning instants, every one, and at eac
 """
 from __future__ import annotations
 
-import io
 from pathlib import Path
 
 import numpy as np
@@ -40,7 +39,8 @@ the clearance stays the loop's to 1 mm (assert_reproduces)."""
 @pytest.fixture(scope="module")
 def graph_bag(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
     path = tmp_path_factory.mktemp("equivalence") / "bag"
-    summary = launch(load_scenario(SCENARIO), {"scenario": SCENARIO}, out=io.StringIO(), bag=path, lockstep=True)
+    with open(path.parent / "launch.log", "w", encoding="utf-8") as out:  # beside the bag, kept if a test fails
+        summary = launch(load_scenario(SCENARIO), {"scenario": SCENARIO}, out=out, bag=path, lockstep=True)
     return path, summary
 
 
