@@ -261,6 +261,42 @@ def test_a_finished_status_that_arrives_after_the_simulator_exited_is_a_finished
     assert summary["outcome"] != "incomplete" and "cut short" not in summary["reason"], summary["reason"]
 
 
+def test_a_killed_node_whose_exit_is_heard_late_has_died_not_stalled(monkeypatch: pytest.MonkeyPatch) -> None:
+    """An injected kill is a node the launcher knows is dead: ``died``, whenever its exit is heard.  ci49 (two suites
+    at once) found a killed ``weight_fbl`` also ``stalled``: in lockstep the graph steps on without it, and the fork
+    server's report of its exit came three simulated seconds after its last status.  Here the report of the killed
+    node's exit is held until the graph is at 6 s of simulated time (the kill is at 2.5 s, its last status at 2 s):
+    its silence is not a stall."""
+    from moose_ros.faults import Fault
+    from moose_ros.forkserver import ForkedProcess
+    from moose_ros.launch import Supervisor
+
+    end, watch_heartbeats = ForkedProcess.end, Supervisor.watch_heartbeats
+    now: list[float] = [0.0]
+    held: list[tuple[int, float]] = []
+
+    def watch(self: Supervisor) -> None:
+        now[0] = self.monitor.sim_time or 0.0
+        watch_heartbeats(self)
+
+    def end_late(self: ForkedProcess, status: int) -> None:
+        if self.args[1:2] == ["weight_fbl"]:
+            deadline = time.monotonic() + 120.0
+            while now[0] < 6.0 and time.monotonic() < deadline:
+                time.sleep(0.01)
+            held.append((status, now[0]))
+        end(self, status)
+
+    monkeypatch.setattr(ForkedProcess, "end", end_late)
+    monkeypatch.setattr(Supervisor, "watch_heartbeats", watch)
+    summary = launch(load_scenario("paper_v6_w2.0"), {"scenario": "paper_v6_w2.0", "duration": 9.0}, out=io.StringIO(),
+                     faults=[Fault("weight_fbl", "kill", 2.5, 0.0)], lockstep=True)
+    assert len(held) == 1 and held[0][0] == -signal.SIGKILL and 6.0 <= held[0][1] < 9.0, held  # heard late
+    died = [i for i in summary["incidents"] if i["node"] == "weight_fbl" and i["kind"] == "died"]
+    assert len(died) == 1 and died[0]["t"] >= 6.0, summary["incidents"]  # during the run, once heard
+    assert [i for i in summary["incidents"] if i["node"] == "weight_fbl" and i["kind"] == "stalled"] == []
+
+
 SLOW_TO_GO = '''
 import moose_ros.nodes.simulator as simulator
 _go_away = simulator.VehicleSimulator.go_away

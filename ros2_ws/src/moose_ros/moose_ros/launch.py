@@ -468,13 +468,16 @@ class Supervisor:
         time for the nodes on ``use_sim_time`` or in lockstep, the wall clock for the others) is a ``stalled``
         incident, once per silence.  The simulator is not watched once it has finished: it is going away (it waits
         up to ``FINAL_DELIVERY`` for its readers' acknowledgements, then tears down), and the launcher awaits its
-        exit."""
+        exit.  Nor is a node the launcher has killed (an injected ``kill``): it is silent because it is dead, and its
+        end is the incident ``died`` whenever its exit is heard; when that is, is the machine's load, not the run's
+        (ci49: a killed ``weight_fbl`` was ``stalled`` too, three simulated seconds after its last status, when the
+        fork server's report of its exit came that late)."""
         deadline = DIAGNOSTICS.deadline
         assert deadline is not None
         now_wall, now_sim = time.monotonic(), self.monitor.sim_time
         for name in self.procs:
-            if name in self.exits or name not in self.monitor.heard or (name == "vehicle_simulator"
-                                                                          and self.monitor.finished):
+            if name in self.exits or name in self.injector.killed or name not in self.monitor.heard or (
+                    name == "vehicle_simulator" and self.monitor.finished):
                 continue
             wall, sim = self.monitor.heard[name]
             on_sim = bool(self.overrides[name].get("use_sim_time") or self.overrides[name].get("lockstep_nodes"))
