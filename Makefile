@@ -49,7 +49,7 @@ COVERAGE_CORE ?= $(shell $(BIN)/python -c 'import sys; print("sysmon" if sys.ver
 COVERAGE = env -u PYTHONDONTWRITEBYTECODE COVERAGE_CORE=$(COVERAGE_CORE) MOOSE_COVERAGE_DIR=$(CURDIR)/.coverage-data \
 	$(BIN)/python -m coverage
 test: $(STAMP)
-	rm -rf .coverage-data runs/tests && mkdir -p .coverage-data runs/tests
+	rm -rf .coverage-data runs/tests && mkdir -p .coverage-data runs/tests $(TEST_TMP)
 	$(BIN)/python -m compileall -q src ros2_ws/src tests bench > /dev/null
 	@a=0; b=0; \
 	$(COVERAGE) run -m pytest -n $(TEST_JOBS) --dist loadgroup -m 'not realtime' --basetemp=$(TEST_TMP)/parallel \
