@@ -2,11 +2,12 @@
 
 A DDS domain is claimed with an exclusive, non-blocking ``flock`` on a file under the system's
 temporary folder, held until :func:`release_domain` (or until the process dies: the kernel releases it,
-even on SIGKILL), and only if Cyclone DDS's discovery port of that domain (7400 + 250 · id, the
-RTPS well-known port) can be bound on loopback, so a graph left over from another test or run is noticed.
-Each test has a domain of its own (tests/conftest.py): a process claims the domains in turn from where its
-last claim ended, so a domain it released is the last it takes again, and a writer an earlier test left
-behind is never matched by a later test's reader.
+even on SIGKILL), and only if the domain's RTPS well-known discovery ports can be bound on loopback
+(:func:`domain_unused`), so a graph left over from another test or run is noticed.
+Each test has a domain of its own (tests/conftest.py): the processes of every run on the machine claim the
+domains in turn (a counter in a lock file, :data:`NEXT_DOMAIN`), so a domain released is the last any of them
+takes again, and a participant an earlier test left behind (still ending, or leaked) has a whole round of
+claims to go before a later test could meet it.
 UDP ports for the CAN bus are taken from the kernel (bind to port 0) and held by a lock file too,
 so two concurrent runs never share a bus.
 
@@ -61,22 +62,39 @@ def _udp_port_free(port: int) -> bool:
     return True
 
 
-_next_domain = os.getpid() % len(DOMAIN_IDS)
-"""Index in :data:`DOMAIN_IDS` where this process's next claim starts looking (after its last claim)."""
+def domain_unused(domain: int) -> bool:
+    """Whether no participant on this host holds the domain's discovery ports (RTPS's well-known ports): the
+    multicast one, 7400 + 250 · id, bound by Cyclone DDS with SPDP multicast (the tests' configuration) and by
+    Fast DDS, and the unicast one of participant index 0, 7410 + 250 · id, bound by Fast DDS (rclpy) and by Cyclone
+    DDS with participant indices (the ``LOCALHOST`` configuration of tests/ros2_prefix.py)."""
+    return _udp_port_free(7400 + 250 * domain) and _udp_port_free(7410 + 250 * domain)
+
+
+NEXT_DOMAIN = "dds-domain-next"
+"""Lock file holding the index in :data:`DOMAIN_IDS` where the machine's next claim starts looking (after the last
+claim of any process)."""
 
 
 def claim_domain() -> int:
     """A DDS domain id locked for this process and with its discovery port free; raises if none is left.
 
-    The search starts after this process's last claim: the domains are taken in turn, and one just released is
-    taken again only after every other (a participant that outlived its test has had that long to end)."""
-    global _next_domain
-    for i in range(len(DOMAIN_IDS)):
-        index = (_next_domain + i) % len(DOMAIN_IDS)
-        domain = DOMAIN_IDS[index]
-        if _udp_port_free(7400 + 250 * domain) and _lock(f"dds-domain-{domain}"):
-            _next_domain = index + 1
-            return domain
+    The search starts after the last claim of any process on the machine (read and advanced under an exclusive lock
+    of :data:`NEXT_DOMAIN`): the domains are taken in turn, and one just released is taken again only after every
+    other."""
+    LOCK_DIR.mkdir(parents=True, exist_ok=True)
+    with open(LOCK_DIR / NEXT_DOMAIN, "a+", encoding="utf-8") as counter:
+        fcntl.flock(counter, fcntl.LOCK_EX)  # released when the file closes
+        counter.seek(0)
+        text = counter.read().strip()
+        start = int(text) % len(DOMAIN_IDS) if text.isdigit() else os.getpid() % len(DOMAIN_IDS)
+        for i in range(len(DOMAIN_IDS)):
+            index = (start + i) % len(DOMAIN_IDS)
+            domain = DOMAIN_IDS[index]
+            if domain_unused(domain) and _lock(f"dds-domain-{domain}"):
+                counter.seek(0)
+                counter.truncate()
+                counter.write(str((index + 1) % len(DOMAIN_IDS)))
+                return domain
     raise RuntimeError(f"no free DDS domain in {DOMAIN_IDS}: every one is locked by another test run")
 
 

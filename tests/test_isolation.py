@@ -2,7 +2,7 @@
 
 * Two test runs at once claim different DDS domains and UDP ports (tests/isolation.py), also when a domain's
   discovery port is taken by a process that holds no lock (a graph left running by something else).
-* Each test has a domain of its own, locked while it runs; a domain released is not the next one claimed.
+* Each test has a domain of its own, locked while it runs; the machine's processes claim the domains in turn.
 * Two test runs at once, of tests that start graphs on DDS, use CAN buses on UDP and hold the real-time slot,
   both pass (the whole suite twice at once is run by hand: 2 × 30 min does not fit CI's budget).
 * The real-time slot is held by one process at a time: another waits for it, and fails after its wait.
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import pytest
 
-from isolation import DOMAIN_IDS, LOCK_DIR, realtime_slot
+from isolation import DOMAIN_IDS, LOCK_DIR, domain_unused, realtime_slot
 
 TESTS = Path(__file__).resolve().parent
 
@@ -64,24 +64,55 @@ def test_concurrent_runs_claim_different_domains_and_ports() -> None:
     assert again[0]["domain"] in DOMAIN_IDS
 
 
-ROTATE = textwrap.dedent("""
+ONE_CLAIM = textwrap.dedent("""
     import json, sys
     sys.path.insert(0, sys.argv[1])
     from isolation import claim_domain, release_domain
-    first = claim_domain()
-    release_domain(first)
-    second = claim_domain()
-    print(json.dumps([first, second]))
+    domain = claim_domain()
+    release_domain(domain)
+    print(json.dumps(domain))
 """)
 
 
-def test_a_released_domain_is_not_the_next_one_claimed() -> None:
-    # each test claims a domain and releases it after: the next test's domain is another one, so a participant the
-    # earlier test left behind (ending, or leaked) cannot meet the later test's
-    out = subprocess.run([sys.executable, "-c", ROTATE, str(TESTS)], capture_output=True, text=True, timeout=30,
-                         check=True)
-    first, second = json.loads(out.stdout)
-    assert first != second and {first, second} <= set(DOMAIN_IDS)
+def claimed_alone(locks: Path) -> int:
+    """The domain a new process claims (and releases) with ``locks`` as its temporary folder: a lock folder of the
+    test's own, which no other test run's claims change meanwhile."""
+    out = subprocess.run([sys.executable, "-c", ONE_CLAIM, str(TESTS)], capture_output=True, text=True, timeout=30,
+                         check=True, env={**os.environ, "TMPDIR": str(locks)})
+    return int(json.loads(out.stdout))
+
+
+def after(domain: int, steps: int = 1) -> int:
+    return DOMAIN_IDS[(DOMAIN_IDS.index(domain) + steps) % len(DOMAIN_IDS)]
+
+
+def test_the_processes_of_the_machine_claim_the_domains_in_turn(tmp_path: Path) -> None:
+    # each test claims a domain and releases it after: the next claim, of any process, is the next domain, so a
+    # participant an earlier test left behind (ending, or leaked) meets a later test only a whole round later
+    first = claimed_alone(tmp_path)
+    second = claimed_alone(tmp_path)  # another process: its own pid, the machine's turn
+    third = claimed_alone(tmp_path)
+    if not all(domain_unused(after(first, k)) for k in (1, 2)):
+        pytest.skip(reason=f"a domain after {first} was in use meanwhile")
+    assert (second, third) == (after(first), after(first, 2))
+
+
+@pytest.mark.parametrize("offset", [0, 10], ids=["multicast", "unicast-participant-0"])
+def test_a_domain_whose_discovery_port_is_in_use_is_skipped(tmp_path: Path, offset: int) -> None:
+    # a process holding a discovery port of the next domain in turn (7400 + 250 id: Cyclone's SPDP multicast, Fast
+    # DDS; 7410 + 250 id: the first participant's unicast port, Fast DDS and Cyclone with participant indices)
+    # without a lock: a leftover graph
+    domain = after(claimed_alone(tmp_path))  # the next one in turn
+    squatter = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        squatter.bind(("127.0.0.1", 7400 + offset + 250 * domain))
+    except OSError:
+        squatter.close()
+        pytest.skip(reason=f"the discovery port of domain {domain} was taken meanwhile")
+    try:
+        assert claimed_alone(tmp_path) == after(domain)  # skipped
+    finally:
+        squatter.close()
 
 
 SEEN_DOMAINS: list[int] = []
@@ -95,25 +126,6 @@ def test_each_test_has_a_domain_of_its_own(case: str, dds_domain: int, dds_modul
     held, procs = claims(2)  # locked while the test runs: another process is given other domains
     release(procs)
     assert dds_domain not in [h["domain"] for h in held]
-
-
-def test_a_domain_whose_discovery_port_is_in_use_is_skipped() -> None:
-    # a process holding the next free domain's discovery port (7400 + 250 id) without a lock: a leftover graph
-    probe, procs = claims(1)
-    release(procs)
-    domain = probe[0]["domain"]
-    squatter = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    try:
-        squatter.bind(("127.0.0.1", 7400 + 250 * domain))
-    except OSError:
-        squatter.close()
-        pytest.skip(reason=f"the discovery port of domain {domain} was taken meanwhile")
-    try:
-        held, procs = claims(1)
-        release(procs)
-        assert held[0]["domain"] != domain
-    finally:
-        squatter.close()
 
 
 INNER = textwrap.dedent('''
