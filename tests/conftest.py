@@ -8,6 +8,7 @@ import os
 import resource
 import subprocess
 import sys
+import threading
 import uuid
 from pathlib import Path
 from typing import Any, Iterator, Optional
@@ -208,7 +209,8 @@ def realtime(request: pytest.FixtureRequest) -> Iterator[None]:
 
 @pytest.fixture(scope="session", autouse=True)
 def dds_loopback(tmp_path_factory: pytest.TempPathFactory) -> None:
-    """Cyclone DDS bound to the loopback interface, for every process of the test run."""
+    """Cyclone DDS bound to the loopback interface, for every process of the test run, and a domain of the run's
+    own outside the tests' (which :func:`dds_domain` gives each)."""
     config = tmp_path_factory.mktemp("dds") / "cyclonedds.xml"
     config.write_text(
         '<CycloneDDS><Domain Id="any"><General><Interfaces><NetworkInterface name="lo"/></Interfaces>'
@@ -216,7 +218,25 @@ def dds_loopback(tmp_path_factory: pytest.TempPathFactory) -> None:
     )
     os.environ["CYCLONEDDS_URI"] = config.as_uri()
     os.environ["MOOSE_RUNTIME"] = "dds"
+    os.environ["ROS_DOMAIN_ID"] = str(claim_domain())  # session fixtures' (none starts a graph today); held to the end
     os.environ.setdefault("MOOSE_CACHE_DIR", str(Path.home() / ".cache" / "moose"))
+
+
+CLOSE_WAIT = 5.0
+"""Seconds a test's end waits for Cyclone DDS to delete the domain the test's process used (a deletion still running
+then goes on in its thread; the domain's discovery port stays bound meanwhile, so no test claims it)."""
+
+
+def close_cyclone_domain(domain: int) -> None:
+    """Delete this process's Cyclone DDS domain ``domain`` if a node of moose_ros's runtime made it here and none is
+    left in it (``moose_ros.runtime.dds.close_domain``): else a test process keeps every domain it ever used, with
+    its threads, sockets and discovery port."""
+    dds = sys.modules.get("moose_ros.runtime.dds")
+    if dds is None:
+        return
+    closing = threading.Thread(target=dds.close_domain, args=(domain,), name=f"close-domain-{domain}", daemon=True)
+    closing.start()
+    closing.join(CLOSE_WAIT)
 
 
 @contextlib.contextmanager
@@ -232,6 +252,7 @@ def own_domain() -> Iterator[int]:
             del os.environ["ROS_DOMAIN_ID"]
         else:
             os.environ["ROS_DOMAIN_ID"] = before
+        close_cyclone_domain(domain)
         release_domain(domain)
 
 

@@ -455,3 +455,21 @@ def test_wait_acknowledged_says_whether_every_reader_acknowledged() -> None:
             stop([stopped], grace=1.0)
         talker.shutdown()
         listener.shutdown()
+
+
+def test_a_domain_without_nodes_is_closed_and_its_discovery_port_freed() -> None:
+    """``close_domain``: what the test suite calls at each test's end (tests/conftest.py), since each test has a
+    domain of its own; a test process once kept every domain it used (42 in one worker, 350 file descriptors)."""
+    from isolation import domain_unused
+    from moose_ros.runtime.dds import close_domain
+
+    domain = int(os.environ["ROS_DOMAIN_ID"])
+    first, second = DdsNode("closing_one"), DdsNode("closing_two")
+    assert not domain_unused(domain)  # the domain's discovery port is bound while it exists
+    first.shutdown()
+    assert not close_domain(domain)  # a node is left in it
+    second.shutdown()
+    assert close_domain(domain) and domain_unused(domain)
+    assert not close_domain(domain)  # already gone
+    again = DdsNode("closing_again")  # a node can make it anew
+    again.shutdown()

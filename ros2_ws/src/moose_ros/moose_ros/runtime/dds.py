@@ -172,6 +172,7 @@ class DdsNode(NodeBase):
         self.discovery = Discovery.from_environ()
         _create_domain(self.domain_id, self.discovery)
         self.participant = DomainParticipant(self.domain_id, qos=DdsQos(Policy.Userdata(participant_user_data())))
+        _DOMAIN_NODES[self.domain_id] = _DOMAIN_NODES.get(self.domain_id, 0) + 1
         self._waitset = WaitSet(self.participant)
         self._guard = GuardCondition(self.participant)
         self._waitset.attach(self._guard)
@@ -548,6 +549,7 @@ class DdsNode(NodeBase):
         participant.__del__()
         if overrun is not None:
             overrun.cancel()
+        _DOMAIN_NODES[self.domain_id] -= 1
         self._readers, self._writers, self._topics, self._discovery = [], [], {}, []
 
     def _release_overrun(self) -> None:
@@ -558,7 +560,26 @@ class DdsNode(NodeBase):
 
 
 _DOMAINS: dict[int, tuple[Optional[str], Any]] = {}
-"""The Cyclone DDS domains this process created: id → (configuration, Domain), kept for the process's life."""
+"""The Cyclone DDS domains this process created: id → (configuration, Domain), kept for the process's life unless
+:func:`close_domain` deletes one."""
+
+_DOMAIN_NODES: dict[int, int] = {}
+"""Domain id → how many nodes of this process have a participant in it."""
+
+
+def close_domain(domain_id: int) -> bool:
+    """Delete this process's Cyclone DDS domain ``domain_id`` (its threads and sockets) when none of its nodes is
+    left in it; whether it did.  For a process that moves from domain to domain: the test suite gives each test a
+    domain of its own, and a test process that ran fifty in-process launches kept fifty domains, 350 file
+    descriptors, and each domain's discovery port, which no other test could then claim.  A node process never
+    calls it: it ends through :func:`moose.exiting.end_process` without deleting its domain (a deletion that
+    can hang in Cyclone DDS)."""
+    if _DOMAIN_NODES.get(domain_id, 0) > 0 or domain_id not in _DOMAINS:
+        return False
+    _config, domain = _DOMAINS.pop(domain_id)
+    _DOMAIN_NODES.pop(domain_id, None)
+    domain.__del__()
+    return True
 
 
 WRITER_LINGER = "100ms"
