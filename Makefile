@@ -49,12 +49,12 @@ COVERAGE_CORE ?= $(shell $(BIN)/python -c 'import sys; print("sysmon" if sys.ver
 COVERAGE = env -u PYTHONDONTWRITEBYTECODE COVERAGE_CORE=$(COVERAGE_CORE) MOOSE_COVERAGE_DIR=$(CURDIR)/.coverage-data \
 	$(BIN)/python -m coverage
 test: $(STAMP)
-	rm -rf .coverage-data runs/tests && mkdir -p .coverage-data runs/tests $(TEST_TMP)
+	rm -rf .coverage-data runs/tests && mkdir -p .coverage-data runs/tests "$(TEST_TMP)"
 	$(BIN)/python -m compileall -q src ros2_ws/src tests bench > /dev/null
 	@a=0; b=0; \
-	$(COVERAGE) run -m pytest -n $(TEST_JOBS) --dist loadgroup -m 'not realtime' --basetemp=$(TEST_TMP)/parallel \
+	$(COVERAGE) run -m pytest -n $(TEST_JOBS) --dist loadgroup -m 'not realtime' --basetemp="$(TEST_TMP)/parallel" \
 		--junitxml=runs/tests/parallel.xml $(PYTEST_ARGS) || a=$$?; \
-	$(COVERAGE) run -m pytest -m realtime --basetemp=$(TEST_TMP)/realtime --junitxml=runs/tests/realtime.xml \
+	$(COVERAGE) run -m pytest -m realtime --basetemp="$(TEST_TMP)/realtime" --junitxml=runs/tests/realtime.xml \
 		$(PYTEST_ARGS) || b=$$?; \
 	if [ $$a -eq 5 ] && [ $$b -eq 5 ]; then echo "make test: no test selected"; exit 5; fi; \
 	if [ $$a -eq 5 ]; then a=0; fi; if [ $$b -eq 5 ]; then b=0; fi; \

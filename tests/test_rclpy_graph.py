@@ -259,12 +259,12 @@ def test_mixed_graph_simulator_and_observer_on_rclpy_the_rest_on_cyclone(
     env = {**dds_env, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}  # the launcher: .venv's interpreter, no rclpy
     env.pop("MOOSE_RUNTIME")
     result = run([sys.executable, "-c", MIXED, EXTREME, json.dumps(runtimes), str(tmp_path / "bag")], env, LIMIT)
+    (tmp_path / "launch.log").write_text(result.stdout + result.stderr)  # kept by pytest if the test fails
     assert result.returncode == 0, (result.stdout + result.stderr)[-3000:]  # the summary says why
     log, summary = result.stdout.rsplit("\n", 2)[0], json.loads(result.stdout.strip().splitlines()[-1])
-    (tmp_path / "launch.log").write_text(result.stdout + result.stderr)  # kept by pytest if the test fails
     assert summary["runtime"] == {**runtimes, "moose_monitor": "dds"}
     odom = read_odometry(tmp_path / "bag")
-    missing = sorted({round(0.01 * k, 2) for k in range(901)} - {round(t, 2) for t, _y in odom})
+    missing = sorted({round(0.01 * k, 2) for k in range(901)} - {round(t, 2) for t, _y in odom})  # from the bag
     assert not summary["degraded"] and summary["odom_samples"] == 901, (summary["incidents"], missing)
     assert_reproduces(summary, reference(load_scenario(EXTREME)))
     # the Cyclone nodes' start-up diagnostics reached the rclpy simulator, which then started simulated time
